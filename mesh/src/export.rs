@@ -1,0 +1,683 @@
+//! GLB export of an instanced mesh (glTF 2.0 spec; EXT_mesh_gpu_instancing;
+//! KHR_mesh_quantization; EXT_meshopt_compression; KHR_texture_transform).
+//!
+//! Each submesh becomes one glTF mesh. A submesh with two or more instances that are all TRS is
+//! one node with EXT_mesh_gpu_instancing; otherwise each instance is a node with a matrix, or,
+//! when the transform has shear (which a glTF matrix may not), a parent and child pair from
+//! [`crate::transform::decompose_svd`]. Mirrored instances keep their negative determinant,
+//! which glTF renderers answer by flipping the winding, as [`InstancedMesh::expand`] does.
+//!
+//! With compression (the approach of meshoptimizer's gltfpack): indices are optimised for the
+//! vertex cache and vertices for fetch order; positions become 16-bit integers whose
+//! dequantisation (offset and uniform scale) is folded into each instance transform, normals
+//! 8-bit, UVs in [0, 1] and colours 16-bit (KHR_mesh_quantization); every vertex, index and
+//! instance stream is then meshopt-encoded (EXT_meshopt_compression, with a fallback buffer).
+
+use std::collections::{BTreeMap, BTreeSet};
+
+use glam::{Affine3A, Mat4, Vec3, Vec4};
+use serde_json::{json, Map, Value};
+
+use crate::error::ExportError;
+use crate::model::{AlphaMode, InstancedMesh, Material, Submesh, Texture, Wrap};
+use crate::transform::{decompose_svd, decompose_trs, Trs};
+
+/// Options for [`export_glb`].
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct ExportOptions {
+    /// Quantize and meshopt-encode geometry (lossy for positions at 16 bits per axis).
+    pub compress: bool,
+}
+
+impl ExportOptions {
+    /// Plain float attributes, readable by every glTF loader.
+    pub fn plain() -> Self {
+        Self { compress: false }
+    }
+
+    /// Quantized, meshopt-compressed output for serving.
+    pub fn compressed() -> Self {
+        Self { compress: true }
+    }
+}
+
+/// Writes `mesh` as a self-contained GLB.
+pub fn export_glb(mesh: &InstancedMesh, options: &ExportOptions) -> Result<Vec<u8>, ExportError> {
+    // Stage 1: refuse a mesh that breaks the model's invariants.
+    mesh.validate()?;
+    let mut w = GlbWriter::new(options.compress);
+    // Stage 2: geometry, one glTF mesh per submesh; remember each dequantisation transform.
+    let dequantize: Vec<Affine3A> = mesh
+        .submeshes
+        .iter()
+        .map(|s| w.write_submesh(s))
+        .collect::<Result<_, _>>()?;
+    // Stage 3: textures and materials.
+    w.write_textures(&mesh.textures);
+    for m in &mesh.materials {
+        w.write_material(m);
+    }
+    // Stage 4: nodes, GPU-instanced where every instance of a submesh is TRS.
+    w.write_nodes(mesh, &dequantize)?;
+    // Stage 5: the JSON document and the GLB container.
+    w.finish()
+}
+
+/// glTF component types and buffer view targets.
+const FLOAT: u32 = 5126;
+const UNSIGNED_SHORT: u32 = 5123;
+const UNSIGNED_INT: u32 = 5125;
+const BYTE: u32 = 5120;
+const ARRAY_BUFFER: u32 = 34962;
+const ELEMENT_ARRAY_BUFFER: u32 = 34963;
+
+/// How a buffer view's bytes are stored.
+enum Encoding<'a> {
+    /// meshopt vertex codec, for vertex and instance attributes.
+    Attributes { stride: usize },
+    /// meshopt index codec, for triangle lists.
+    Triangles {
+        indices: &'a [u32],
+        vertex_count: usize,
+    },
+}
+
+/// A vertex attribute ready to write: tightly packed elements of `stride` bytes.
+struct Attribute {
+    bytes: Vec<u8>,
+    stride: usize,
+    component_type: u32,
+    normalized: bool,
+    type_name: &'static str,
+    count: usize,
+    bounds: Option<(Vec<f64>, Vec<f64>)>,
+}
+
+/// Accumulates the glTF JSON arrays and the binary chunk.
+struct GlbWriter {
+    compress: bool,
+    /// The GLB binary chunk (buffer 0).
+    bin: Vec<u8>,
+    /// Size of the virtual uncompressed buffer (buffer 1) that compressed views decode into.
+    fallback_len: usize,
+    accessors: Vec<Value>,
+    buffer_views: Vec<Value>,
+    meshes: Vec<Value>,
+    materials: Vec<Value>,
+    textures: Vec<Value>,
+    images: Vec<Value>,
+    samplers: Vec<Value>,
+    nodes: Vec<Value>,
+    roots: Vec<usize>,
+    extensions_used: BTreeSet<&'static str>,
+    extensions_required: BTreeSet<&'static str>,
+}
+
+impl GlbWriter {
+    fn new(compress: bool) -> Self {
+        Self {
+            compress,
+            bin: Vec::new(),
+            fallback_len: 0,
+            accessors: Vec::new(),
+            buffer_views: Vec::new(),
+            meshes: Vec::new(),
+            materials: Vec::new(),
+            textures: Vec::new(),
+            images: Vec::new(),
+            samplers: Vec::new(),
+            nodes: Vec::new(),
+            roots: Vec::new(),
+            extensions_used: BTreeSet::new(),
+            extensions_required: BTreeSet::new(),
+        }
+    }
+
+    fn align_bin(&mut self) {
+        while self.bin.len() % 4 != 0 {
+            self.bin.push(0);
+        }
+    }
+
+    /// Appends a buffer view holding `bytes` (encoded as asked when compressing).
+    fn add_view(
+        &mut self,
+        bytes: &[u8],
+        stride: Option<usize>,
+        target: Option<u32>,
+        encoding: Encoding<'_>,
+    ) -> Result<usize, ExportError> {
+        self.align_bin();
+        let mut view = Map::new();
+        let encoded = match encoding {
+            _ if !self.compress => None,
+            Encoding::Attributes { stride } => Some((
+                crate::meshopt_stream::encode_vertex_stream(bytes, stride)
+                    .map_err(|e| ExportError::Encode(format!("{e:?}")))?,
+                "ATTRIBUTES",
+                stride,
+                bytes.len() / stride,
+            )),
+            Encoding::Triangles {
+                indices,
+                vertex_count,
+            } => Some((
+                meshopt::encode_index_buffer(indices, vertex_count)
+                    .map_err(|e| ExportError::Encode(format!("{e:?}")))?,
+                "TRIANGLES",
+                bytes.len() / indices.len().max(1),
+                indices.len(),
+            )),
+        };
+        match encoded {
+            None => {
+                view.insert("buffer".into(), json!(0));
+                view.insert("byteOffset".into(), json!(self.bin.len()));
+                self.bin.extend_from_slice(bytes);
+            }
+            Some((data, mode, ext_stride, count)) => {
+                view.insert("buffer".into(), json!(1));
+                view.insert("byteOffset".into(), json!(self.fallback_len));
+                self.fallback_len += bytes.len().div_ceil(4) * 4;
+                view.insert(
+                    "extensions".into(),
+                    json!({"EXT_meshopt_compression": {
+                        "buffer": 0,
+                        "byteOffset": self.bin.len(),
+                        "byteLength": data.len(),
+                        "byteStride": ext_stride,
+                        "count": count,
+                        "mode": mode,
+                    }}),
+                );
+                self.bin.extend_from_slice(&data);
+            }
+        }
+        view.insert("byteLength".into(), json!(bytes.len()));
+        if let Some(s) = stride {
+            view.insert("byteStride".into(), json!(s));
+        }
+        if let Some(t) = target {
+            view.insert("target".into(), json!(t));
+        }
+        self.buffer_views.push(Value::Object(view));
+        Ok(self.buffer_views.len() - 1)
+    }
+
+    fn add_accessor(&mut self, view: usize, a: &Attribute) -> usize {
+        let mut acc = Map::new();
+        acc.insert("bufferView".into(), json!(view));
+        acc.insert("componentType".into(), json!(a.component_type));
+        if a.normalized {
+            acc.insert("normalized".into(), json!(true));
+        }
+        acc.insert("count".into(), json!(a.count));
+        acc.insert("type".into(), json!(a.type_name));
+        if let Some((min, max)) = &a.bounds {
+            acc.insert("min".into(), json!(min));
+            acc.insert("max".into(), json!(max));
+        }
+        self.accessors.push(Value::Object(acc));
+        self.accessors.len() - 1
+    }
+
+    /// Writes a vertex or instance attribute: its view (meshopt-encoded when compressing) and
+    /// its accessor.
+    fn write_attribute(&mut self, a: &Attribute, target: Option<u32>) -> Result<usize, ExportError> {
+        let view = self.add_view(
+            &a.bytes,
+            target.map(|_| a.stride),
+            target,
+            Encoding::Attributes { stride: a.stride },
+        )?;
+        Ok(self.add_accessor(view, a))
+    }
+
+    /// Writes one submesh as a glTF mesh and returns the transform that maps its stored
+    /// positions back to model space (identity unless positions were quantized).
+    fn write_submesh(&mut self, s: &Submesh) -> Result<Affine3A, ExportError> {
+        // Stage 1: vertex order; compression optimises for the vertex cache and fetch.
+        let (indices, order) = if self.compress {
+            optimise_order(s)
+        } else {
+            (s.indices.clone(), (0..s.positions.len() as u32).collect())
+        };
+        let n = order.len();
+        // Stage 2: attributes, quantized when compressing.
+        let (position, dequantize) = if self.compress {
+            quantize_positions(s, &order)
+        } else {
+            (
+                float_attribute(order.iter().map(|&v| s.positions[v as usize].to_array()), true),
+                Affine3A::IDENTITY,
+            )
+        };
+        let mut attributes = Map::new();
+        let p = self.write_attribute(&position, Some(ARRAY_BUFFER))?;
+        attributes.insert("POSITION".into(), json!(p));
+        if let Some(normals) = &s.normals {
+            let unit = order.iter().map(|&v| {
+                let n = normals[v as usize].try_normalize().unwrap_or(Vec3::Z);
+                n.to_array()
+            });
+            let a = if self.compress {
+                snorm8_attribute(unit)
+            } else {
+                float_attribute(unit, false)
+            };
+            let i = self.write_attribute(&a, Some(ARRAY_BUFFER))?;
+            attributes.insert("NORMAL".into(), json!(i));
+        }
+        if let Some(uvs) = &s.uvs {
+            let values = order.iter().map(|&v| uvs[v as usize].to_array());
+            let in_unit = uvs.iter().all(|t| t.cmpge(glam::Vec2::ZERO).all() && t.cmple(glam::Vec2::ONE).all());
+            let a = if self.compress && in_unit {
+                unorm16_attribute(values)
+            } else {
+                float_attribute(values, false)
+            };
+            let i = self.write_attribute(&a, Some(ARRAY_BUFFER))?;
+            attributes.insert("TEXCOORD_0".into(), json!(i));
+        }
+        if let Some(colors) = &s.colors {
+            // glTF colours live in [0, 1].
+            let values = order
+                .iter()
+                .map(|&v| colors[v as usize].clamp(Vec4::ZERO, Vec4::ONE).to_array());
+            let a = if self.compress {
+                unorm16_attribute(values)
+            } else {
+                float_attribute(values, false)
+            };
+            let i = self.write_attribute(&a, Some(ARRAY_BUFFER))?;
+            attributes.insert("COLOR_0".into(), json!(i));
+        }
+        // Stage 3: indices, 16-bit when every index fits below the primitive-restart value.
+        let wide = n > 65535;
+        let bytes: Vec<u8> = if wide {
+            indices.iter().flat_map(|i| i.to_le_bytes()).collect()
+        } else {
+            indices.iter().flat_map(|&i| (i as u16).to_le_bytes()).collect()
+        };
+        let view = self.add_view(
+            &bytes,
+            None,
+            Some(ELEMENT_ARRAY_BUFFER),
+            Encoding::Triangles {
+                indices: &indices,
+                vertex_count: n,
+            },
+        )?;
+        let index_accessor = self.add_accessor(
+            view,
+            &Attribute {
+                bytes: Vec::new(),
+                stride: 0,
+                component_type: if wide { UNSIGNED_INT } else { UNSIGNED_SHORT },
+                normalized: false,
+                type_name: "SCALAR",
+                count: indices.len(),
+                bounds: None,
+            },
+        );
+        let mut primitive = Map::new();
+        primitive.insert("attributes".into(), Value::Object(attributes));
+        primitive.insert("indices".into(), json!(index_accessor));
+        if let Some(m) = s.material {
+            primitive.insert("material".into(), json!(m));
+        }
+        self.meshes.push(json!({ "primitives": [primitive] }));
+        Ok(dequantize)
+    }
+
+    fn write_textures(&mut self, textures: &[Texture]) {
+        let mut sampler_of: BTreeMap<(u32, u32), usize> = BTreeMap::new();
+        for t in textures {
+            self.align_bin();
+            let offset = self.bin.len();
+            self.bin.extend_from_slice(&t.bytes);
+            self.buffer_views.push(json!({
+                "buffer": 0, "byteOffset": offset, "byteLength": t.bytes.len(),
+            }));
+            self.images.push(json!({
+                "bufferView": self.buffer_views.len() - 1,
+                "mimeType": t.mime_type,
+            }));
+            let key = (wrap_code(t.wrap_u), wrap_code(t.wrap_v));
+            let next = sampler_of.len();
+            let sampler = *sampler_of.entry(key).or_insert(next);
+            if sampler == self.samplers.len() {
+                self.samplers.push(json!({ "wrapS": key.0, "wrapT": key.1 }));
+            }
+            self.textures.push(json!({
+                "source": self.images.len() - 1,
+                "sampler": sampler,
+            }));
+        }
+    }
+
+    fn write_material(&mut self, m: &Material) {
+        let unit = |x: f32| x.clamp(0.0, 1.0);
+        let mut pbr = Map::new();
+        pbr.insert(
+            "baseColorFactor".into(),
+            json!(m.base_color_factor.to_array().map(unit)),
+        );
+        if let Some(t) = &m.base_color_texture {
+            let mut info = json!({ "index": t.texture });
+            if let Some(x) = &t.transform {
+                self.extensions_used.insert("KHR_texture_transform");
+                info["extensions"] = json!({"KHR_texture_transform": {
+                    "offset": x.offset.to_array(),
+                    "rotation": x.rotation,
+                    "scale": x.scale.to_array(),
+                }});
+            }
+            pbr.insert("baseColorTexture".into(), info);
+        }
+        pbr.insert("metallicFactor".into(), json!(unit(m.metallic_factor)));
+        pbr.insert("roughnessFactor".into(), json!(unit(m.roughness_factor)));
+        let mut out = Map::new();
+        if let Some(name) = &m.name {
+            out.insert("name".into(), json!(name));
+        }
+        out.insert("pbrMetallicRoughness".into(), Value::Object(pbr));
+        match m.alpha_mode {
+            AlphaMode::Opaque => {}
+            AlphaMode::Mask { cutoff } => {
+                out.insert("alphaMode".into(), json!("MASK"));
+                out.insert("alphaCutoff".into(), json!(cutoff.max(0.0)));
+            }
+            AlphaMode::Blend => {
+                out.insert("alphaMode".into(), json!("BLEND"));
+            }
+        }
+        if m.double_sided {
+            out.insert("doubleSided".into(), json!(true));
+        }
+        self.materials.push(Value::Object(out));
+    }
+
+    fn write_nodes(
+        &mut self,
+        mesh: &InstancedMesh,
+        dequantize: &[Affine3A],
+    ) -> Result<(), ExportError> {
+        for (s, instances) in mesh.instances_by_submesh().iter().enumerate() {
+            let world: Vec<Affine3A> = instances
+                .iter()
+                .map(|&k| mesh.instances[k].transform * dequantize[s])
+                .collect();
+            let all_trs: Option<Vec<Trs>> = world.iter().map(decompose_trs).collect();
+            match all_trs {
+                Some(trs) if trs.len() >= 2 => self.write_gpu_instanced_node(s, &trs)?,
+                _ => {
+                    for w in &world {
+                        self.write_matrix_node(s, w);
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn write_gpu_instanced_node(&mut self, mesh: usize, trs: &[Trs]) -> Result<(), ExportError> {
+        self.extensions_used.insert("EXT_mesh_gpu_instancing");
+        let t = float_attribute(trs.iter().map(|x| x.translation.to_array()), false);
+        let r = float_attribute(trs.iter().map(|x| x.rotation.to_array()), false);
+        let s = float_attribute(trs.iter().map(|x| x.scale.to_array()), false);
+        let t = self.write_attribute(&t, None)?;
+        let r = self.write_attribute(&r, None)?;
+        let s = self.write_attribute(&s, None)?;
+        self.nodes.push(json!({
+            "mesh": mesh,
+            "extensions": {"EXT_mesh_gpu_instancing": {"attributes": {
+                "TRANSLATION": t, "ROTATION": r, "SCALE": s,
+            }}},
+        }));
+        self.roots.push(self.nodes.len() - 1);
+        Ok(())
+    }
+
+    /// One node with a matrix, or a parent and child pair when the transform has shear.
+    fn write_matrix_node(&mut self, mesh: usize, world: &Affine3A) {
+        let matrix = |a: &Affine3A| Mat4::from(*a).to_cols_array();
+        if decompose_trs(world).is_some() {
+            self.nodes.push(json!({ "mesh": mesh, "matrix": matrix(world) }));
+            self.roots.push(self.nodes.len() - 1);
+        } else {
+            let (parent, child) = decompose_svd(world);
+            self.nodes.push(json!({
+                "mesh": mesh,
+                "matrix": matrix(&Affine3A::from_quat(child)),
+            }));
+            let child_index = self.nodes.len() - 1;
+            self.nodes.push(json!({
+                "matrix": matrix(&parent.to_affine()),
+                "children": [child_index],
+            }));
+            self.roots.push(self.nodes.len() - 1);
+        }
+    }
+
+    fn finish(mut self) -> Result<Vec<u8>, ExportError> {
+        self.align_bin();
+        let mut buffers = Vec::new();
+        if !self.bin.is_empty() {
+            buffers.push(json!({ "byteLength": self.bin.len() }));
+        }
+        if self.fallback_len > 0 {
+            self.extensions_used.insert("EXT_meshopt_compression");
+            self.extensions_required.insert("EXT_meshopt_compression");
+            buffers.push(json!({
+                "byteLength": self.fallback_len,
+                "extensions": {"EXT_meshopt_compression": {"fallback": true}},
+            }));
+        }
+        if self.compress && !self.meshes.is_empty() {
+            self.extensions_used.insert("KHR_mesh_quantization");
+            self.extensions_required.insert("KHR_mesh_quantization");
+        }
+        let mut doc = Map::new();
+        doc.insert(
+            "asset".into(),
+            json!({"version": "2.0", "generator": "Horizon"}),
+        );
+        doc.insert("scene".into(), json!(0));
+        doc.insert("scenes".into(), json!([{ "nodes": self.roots }]));
+        let arrays = [
+            ("nodes", self.nodes),
+            ("meshes", self.meshes),
+            ("materials", self.materials),
+            ("textures", self.textures),
+            ("images", self.images),
+            ("samplers", self.samplers),
+            ("accessors", self.accessors),
+            ("bufferViews", self.buffer_views),
+            ("buffers", buffers),
+        ];
+        for (name, values) in arrays {
+            if !values.is_empty() {
+                doc.insert(name.into(), Value::Array(values));
+            }
+        }
+        if !self.extensions_used.is_empty() {
+            doc.insert("extensionsUsed".into(), json!(self.extensions_used));
+        }
+        if !self.extensions_required.is_empty() {
+            doc.insert("extensionsRequired".into(), json!(self.extensions_required));
+        }
+        let json = serde_json::to_vec(&Value::Object(doc))
+            .map_err(|e| ExportError::Encode(e.to_string()))?;
+        let total = json.len() as u64 + self.bin.len() as u64 + 28;
+        if total > u64::from(u32::MAX) {
+            return Err(ExportError::TooLarge(total));
+        }
+        let glb = gltf::Glb {
+            header: gltf::binary::Header {
+                magic: *b"glTF",
+                version: 2,
+                length: 0,
+            },
+            json: json.into(),
+            bin: (!self.bin.is_empty()).then_some(self.bin.into()),
+        };
+        glb.to_vec().map_err(|e| ExportError::Encode(e.to_string()))
+    }
+}
+
+fn wrap_code(w: Wrap) -> u32 {
+    match w {
+        Wrap::Repeat => 10497,
+        Wrap::MirroredRepeat => 33648,
+        Wrap::ClampToEdge => 33071,
+    }
+}
+
+/// Indices optimised for the vertex cache, and the vertex order optimised for fetch: returns
+/// the new indices and, for each new vertex, its old index. Unused vertices are dropped.
+fn optimise_order(s: &Submesh) -> (Vec<u32>, Vec<u32>) {
+    let n = s.positions.len();
+    let cached = meshopt::optimize_vertex_cache(&s.indices, n);
+    let remap = meshopt::optimize_vertex_fetch_remap(&cached, n);
+    let kept = remap.iter().filter(|&&r| r != u32::MAX).count();
+    let mut order = vec![0u32; kept];
+    for (old, &new) in remap.iter().enumerate() {
+        if new != u32::MAX {
+            order[new as usize] = old as u32;
+        }
+    }
+    let indices = cached.iter().map(|&i| remap[i as usize]).collect();
+    (indices, order)
+}
+
+/// Float vectors of any width, tightly packed; with `bounds`, min and max per component.
+fn float_attribute<const N: usize>(values: impl Iterator<Item = [f32; N]>, bounds: bool) -> Attribute {
+    let mut bytes = Vec::new();
+    let mut lo = [f32::INFINITY; N];
+    let mut hi = [f32::NEG_INFINITY; N];
+    let mut count = 0;
+    for v in values {
+        for c in 0..N {
+            bytes.extend_from_slice(&v[c].to_le_bytes());
+            lo[c] = lo[c].min(v[c]);
+            hi[c] = hi[c].max(v[c]);
+        }
+        count += 1;
+    }
+    Attribute {
+        bytes,
+        stride: 4 * N,
+        component_type: FLOAT,
+        normalized: false,
+        type_name: type_name(N),
+        count,
+        bounds: (bounds && count > 0).then(|| {
+            (
+                lo.iter().map(|&x| f64::from(x)).collect(),
+                hi.iter().map(|&x| f64::from(x)).collect(),
+            )
+        }),
+    }
+}
+
+/// Unit vectors as signed normalized bytes, padded to 4 bytes per element.
+fn snorm8_attribute(values: impl Iterator<Item = [f32; 3]>) -> Attribute {
+    let mut bytes = Vec::new();
+    let mut count = 0;
+    for v in values {
+        for x in v {
+            bytes.push(meshopt::quantize_snorm(x, 8) as i8 as u8);
+        }
+        bytes.push(0);
+        count += 1;
+    }
+    Attribute {
+        bytes,
+        stride: 4,
+        component_type: BYTE,
+        normalized: true,
+        type_name: "VEC3",
+        count,
+        bounds: None,
+    }
+}
+
+/// Values in [0, 1] as unsigned normalized 16-bit integers (VEC2 or VEC4, already aligned).
+fn unorm16_attribute<const N: usize>(values: impl Iterator<Item = [f32; N]>) -> Attribute {
+    let mut bytes = Vec::new();
+    let mut count = 0;
+    for v in values {
+        for x in v {
+            bytes.extend_from_slice(&(meshopt::quantize_unorm(x, 16) as u16).to_le_bytes());
+        }
+        count += 1;
+    }
+    Attribute {
+        bytes,
+        stride: 2 * N,
+        component_type: UNSIGNED_SHORT,
+        normalized: true,
+        type_name: type_name(N),
+        count,
+        bounds: None,
+    }
+}
+
+/// Positions as unsigned 16-bit integers over the submesh's box, with one scale for all axes
+/// so that folding the dequantisation into a TRS instance keeps it TRS.
+fn quantize_positions(s: &Submesh, order: &[u32]) -> (Attribute, Affine3A) {
+    let mut min = Vec3::splat(f32::INFINITY);
+    let mut max = Vec3::splat(f32::NEG_INFINITY);
+    for &v in order {
+        min = min.min(s.positions[v as usize]);
+        max = max.max(s.positions[v as usize]);
+    }
+    if order.is_empty() {
+        (min, max) = (Vec3::ZERO, Vec3::ZERO);
+    }
+    let extent = (max - min).max_element();
+    let step = if extent > 0.0 { extent / 65535.0 } else { 1.0 };
+    let mut bytes = Vec::with_capacity(order.len() * 8);
+    let mut lo = [u16::MAX; 3];
+    let mut hi = [0u16; 3];
+    for &v in order {
+        let q = ((s.positions[v as usize] - min) / step).round();
+        for c in 0..3 {
+            let x = q[c].clamp(0.0, 65535.0) as u16;
+            lo[c] = lo[c].min(x);
+            hi[c] = hi[c].max(x);
+            bytes.extend_from_slice(&x.to_le_bytes());
+        }
+        // Vertex attributes must start on 4-byte boundaries, so pad each element to 8 bytes.
+        bytes.extend_from_slice(&[0, 0]);
+    }
+    let bounds = (!order.is_empty()).then(|| {
+        (
+            lo.iter().map(|&x| f64::from(x)).collect(),
+            hi.iter().map(|&x| f64::from(x)).collect(),
+        )
+    });
+    let attribute = Attribute {
+        bytes,
+        stride: 8,
+        component_type: UNSIGNED_SHORT,
+        normalized: false,
+        type_name: "VEC3",
+        count: order.len(),
+        bounds,
+    };
+    (
+        attribute,
+        Affine3A::from_scale_rotation_translation(Vec3::splat(step), glam::Quat::IDENTITY, min),
+    )
+}
+
+fn type_name(n: usize) -> &'static str {
+    match n {
+        1 => "SCALAR",
+        2 => "VEC2",
+        3 => "VEC3",
+        _ => "VEC4",
+    }
+}
