@@ -149,6 +149,23 @@ enum Step {
 fn flatten_scenes(r: &Reader<'_>, limits: &Limits) -> Result<Vec<Placement>, ImportError> {
     let doc = r.doc;
     let roots = scene_roots(doc)?;
+    // A node may have several parents (a DAG), so paths can multiply: refuse a graph whose
+    // paths exceed the limits before walking it.
+    let max_visits = limits
+        .max_instances
+        .saturating_mul(4)
+        .saturating_add(doc.nodes.len() as u64);
+    if let Some(paths) = count_paths(doc, &roots)? {
+        let visits = paths.iter().fold(0u64, |a, &p| a.saturating_add(p));
+        Limits::check("node visits while flattening the scene", visits, max_visits)?;
+        let placed = doc
+            .nodes
+            .iter()
+            .zip(&paths)
+            .filter(|(node, _)| node.mesh.is_some())
+            .fold(0u64, |a, (_, &p)| a.saturating_add(p));
+        Limits::check("instance count", placed, limits.max_instances)?;
+    }
     let mut on_path = vec![false; doc.nodes.len()];
     let mut stack: Vec<Step> = roots
         .iter()
@@ -156,11 +173,6 @@ fn flatten_scenes(r: &Reader<'_>, limits: &Limits) -> Result<Vec<Placement>, Imp
         .map(|&n| Step::Enter(n, DMat4::IDENTITY))
         .collect();
     let mut placements = Vec::new();
-    // A node may have several parents (a DAG), so paths can multiply; bound the walk.
-    let max_visits = limits
-        .max_instances
-        .saturating_mul(4)
-        .saturating_add(doc.nodes.len() as u64);
     let mut visits = 0u64;
     while let Some(step) = stack.pop() {
         let (n, parent) = match step {
@@ -202,6 +214,58 @@ fn flatten_scenes(r: &Reader<'_>, limits: &Limits) -> Result<Vec<Placement>, Imp
         }
     }
     Ok(placements)
+}
+
+/// How many paths from the roots reach each node (Kahn's topological order, saturating), or
+/// `None` when the reachable graph has a cycle, which the walk then reports precisely.
+fn count_paths(doc: &Root, roots: &[usize]) -> Result<Option<Vec<u64>>, ImportError> {
+    let n = doc.nodes.len();
+    let children = |i: usize| doc.nodes[i].children.iter().flatten().map(|c| c.value());
+    // Stage 1: the reachable nodes and their in-degrees within that set.
+    let mut reachable = vec![false; n];
+    let mut stack = Vec::new();
+    for &r in roots {
+        if r >= n {
+            return Err(missing("scene", "node", r));
+        }
+        stack.push(r);
+    }
+    while let Some(i) = stack.pop() {
+        if std::mem::replace(&mut reachable[i], true) {
+            continue;
+        }
+        for c in children(i) {
+            if c >= n {
+                return Err(missing(&format!("node {i}"), "child node", c));
+            }
+            stack.push(c);
+        }
+    }
+    let mut indegree = vec![0usize; n];
+    for i in (0..n).filter(|&i| reachable[i]) {
+        for c in children(i) {
+            indegree[c] += 1;
+        }
+    }
+    // Stage 2: propagate path counts in topological order.
+    let mut paths = vec![0u64; n];
+    for &r in roots {
+        paths[r] += 1;
+    }
+    let mut ready: Vec<usize> = (0..n).filter(|&i| reachable[i] && indegree[i] == 0).collect();
+    let mut done = 0;
+    while let Some(i) = ready.pop() {
+        done += 1;
+        for c in children(i) {
+            paths[c] = paths[c].saturating_add(paths[i]);
+            indegree[c] -= 1;
+            if indegree[c] == 0 {
+                ready.push(c);
+            }
+        }
+    }
+    let reachable_count = reachable.iter().filter(|&&r| r).count();
+    Ok((done == reachable_count).then_some(paths))
 }
 
 fn scene_roots(doc: &Root) -> Result<Vec<usize>, ImportError> {
