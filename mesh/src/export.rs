@@ -536,18 +536,24 @@ fn wrap_code(w: Wrap) -> u32 {
 
 /// Indices optimised for the vertex cache, and the vertex order optimised for fetch: returns
 /// the new indices and, for each new vertex, its old index. Unused vertices are dropped.
+///
+/// The fetch order is first use in the optimised index stream, which is what
+/// `meshopt_optimizeVertexFetchRemap` computes; it is done here because the `meshopt` crate's
+/// wrapper (0.7) truncates the remap table to the used-vertex count, losing the entries of
+/// higher-numbered vertices whenever some vertex is unused.
 fn optimise_order(s: &Submesh) -> (Vec<u32>, Vec<u32>) {
     let n = s.positions.len();
-    let cached = meshopt::optimize_vertex_cache(&s.indices, n);
-    let remap = meshopt::optimize_vertex_fetch_remap(&cached, n);
-    let kept = remap.iter().filter(|&&r| r != u32::MAX).count();
-    let mut order = vec![0u32; kept];
-    for (old, &new) in remap.iter().enumerate() {
-        if new != u32::MAX {
-            order[new as usize] = old as u32;
+    let mut indices = meshopt::optimize_vertex_cache(&s.indices, n);
+    let mut remap = vec![u32::MAX; n];
+    let mut order = Vec::new();
+    for i in indices.iter_mut() {
+        let slot = &mut remap[*i as usize];
+        if *slot == u32::MAX {
+            *slot = order.len() as u32;
+            order.push(*i);
         }
+        *i = *slot;
     }
-    let indices = cached.iter().map(|&i| remap[i as usize]).collect();
     (indices, order)
 }
 

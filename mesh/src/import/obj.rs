@@ -137,14 +137,16 @@ pub(crate) fn import(
             });
         }
         let material = m.material_id.filter(|&id| id < mesh.materials.len());
-        mesh.submeshes.push(Submesh {
+        let mut submesh = Submesh {
             positions,
             normals,
             uvs,
             colors,
             indices: m.indices[..m.indices.len() / 3 * 3].to_vec(),
             material,
-        });
+        };
+        super::stl::compact_submesh(&mut submesh);
+        mesh.submeshes.push(submesh);
         mesh.instances.push(Instance {
             submesh: mesh.submeshes.len() - 1,
             transform: glam::Affine3A::IDENTITY,

@@ -50,8 +50,10 @@ pub(crate) fn import(bytes: &[u8], _options: &ImportOptions) -> Result<Imported,
     })
 }
 
-/// A model of one submesh placed once, as the single-mesh formats give.
-pub(crate) fn single_instance(submesh: Submesh) -> InstancedMesh {
+/// A model of one submesh placed once, as the single-mesh formats give. Vertices no triangle
+/// uses are dropped, as the glTF importer does, so every importer yields the same model.
+pub(crate) fn single_instance(mut submesh: Submesh) -> InstancedMesh {
+    compact_submesh(&mut submesh);
     InstancedMesh {
         submeshes: vec![submesh],
         instances: vec![Instance {
@@ -59,5 +61,23 @@ pub(crate) fn single_instance(submesh: Submesh) -> InstancedMesh {
             transform: glam::Affine3A::IDENTITY,
         }],
         ..Default::default()
+    }
+}
+
+/// Drops the vertices no triangle uses from a submesh whose indices are already checked.
+pub(crate) fn compact_submesh(s: &mut Submesh) {
+    let kept = super::compact_vertices(&mut s.indices, s.positions.len());
+    if kept.len() == s.positions.len() {
+        return;
+    }
+    s.positions = super::gather(&s.positions, &kept);
+    if let Some(v) = &mut s.normals {
+        *v = super::gather(v, &kept);
+    }
+    if let Some(v) = &mut s.uvs {
+        *v = super::gather(v, &kept);
+    }
+    if let Some(v) = &mut s.colors {
+        *v = super::gather(v, &kept);
     }
 }
