@@ -47,10 +47,16 @@ pub fn export_glb(mesh: &InstancedMesh, options: &ExportOptions) -> Result<Vec<u
     mesh.validate()?;
     let mut w = GlbWriter::new(options.compress);
     // Stage 2: geometry, one glTF mesh per submesh; remember each dequantisation transform.
+    let by_submesh = mesh.instances_by_submesh();
     let dequantize: Vec<Affine3A> = mesh
         .submeshes
         .iter()
-        .map(|s| w.write_submesh(s))
+        .zip(&by_submesh)
+        .map(|(s, placed)| {
+            let transforms: Vec<Affine3A> =
+                placed.iter().map(|&k| mesh.instances[k].transform).collect();
+            w.write_submesh(s, &transforms)
+        })
         .collect::<Result<_, _>>()?;
     // Stage 3: textures and materials.
     w.write_textures(&mesh.textures);
@@ -235,7 +241,7 @@ impl GlbWriter {
 
     /// Writes one submesh as a glTF mesh and returns the transform that maps its stored
     /// positions back to model space (identity unless positions were quantized).
-    fn write_submesh(&mut self, s: &Submesh) -> Result<Affine3A, ExportError> {
+    fn write_submesh(&mut self, s: &Submesh, placed: &[Affine3A]) -> Result<Affine3A, ExportError> {
         // Stage 1: vertex order; compression optimises for the vertex cache and fetch.
         let (indices, order) = if self.compress {
             optimise_order(s)
@@ -244,14 +250,17 @@ impl GlbWriter {
         };
         let n = order.len();
         // Stage 2: attributes, quantized when compressing.
-        let (position, dequantize) = if self.compress {
-            quantize_positions(s, &order)
-        } else {
+        let quantized = self.compress.then(|| quantize_positions(s, &order)).filter(|(_, d)| {
+            // Folding the dequantisation into an extreme instance transform may overflow f32;
+            // such a submesh keeps float positions.
+            d.is_finite() && placed.iter().all(|t| (*t * *d).is_finite())
+        });
+        let (position, dequantize) = quantized.unwrap_or_else(|| {
             (
                 float_attribute(order.iter().map(|&v| s.positions[v as usize].to_array()), true),
                 Affine3A::IDENTITY,
             )
-        };
+        });
         let mut attributes = Map::new();
         let p = self.write_attribute(&position, Some(ARRAY_BUFFER))?;
         attributes.insert("POSITION".into(), json!(p));
@@ -408,6 +417,11 @@ impl GlbWriter {
                 .iter()
                 .map(|&k| mesh.instances[k].transform * dequantize[s])
                 .collect();
+            if !world.iter().all(Affine3A::is_finite) {
+                // write_submesh leaves a submesh unquantised when folding would overflow, so
+                // this needs an instance transform that was not finite to begin with.
+                return Err(ExportError::Encode(format!("submesh {s}: transform overflows f32")));
+            }
             let all_trs: Option<Vec<Trs>> = world.iter().map(decompose_trs).collect();
             match all_trs {
                 Some(trs) if trs.len() >= 2 => self.write_gpu_instanced_node(s, &trs)?,
@@ -445,8 +459,7 @@ impl GlbWriter {
         if decompose_trs(world).is_some() {
             self.nodes.push(json!({ "mesh": mesh, "matrix": matrix(world) }));
             self.roots.push(self.nodes.len() - 1);
-        } else {
-            let (parent, child) = decompose_svd(world);
+        } else if let Some((parent, child)) = decompose_svd(world) {
             self.nodes.push(json!({
                 "mesh": mesh,
                 "matrix": matrix(&Affine3A::from_quat(child)),
@@ -456,6 +469,11 @@ impl GlbWriter {
                 "matrix": matrix(&parent.to_affine()),
                 "children": [child_index],
             }));
+            self.roots.push(self.nodes.len() - 1);
+        } else {
+            // Shear with singular values past f32's range: no TRS pair can hold it, so keep the
+            // matrix itself. The transform survives; a strict validator flags the node.
+            self.nodes.push(json!({ "mesh": mesh, "matrix": matrix(world) }));
             self.roots.push(self.nodes.len() - 1);
         }
     }
@@ -507,7 +525,13 @@ impl GlbWriter {
         if !self.extensions_required.is_empty() {
             doc.insert("extensionsRequired".into(), json!(self.extensions_required));
         }
-        let json = serde_json::to_vec(&Value::Object(doc))
+        let doc = Value::Object(doc);
+        // serde_json writes a non-finite float as null; every number here is checked finite
+        // upstream, and this keeps any miss from becoming a silently broken file.
+        if contains_null(&doc) {
+            return Err(ExportError::Encode("a non-finite number reached the output".into()));
+        }
+        let json = serde_json::to_vec(&doc)
             .map_err(|e| ExportError::Encode(e.to_string()))?;
         let total = json.len() as u64 + self.bin.len() as u64 + 28;
         if total > u64::from(u32::MAX) {
@@ -523,6 +547,15 @@ impl GlbWriter {
             bin: (!self.bin.is_empty()).then_some(self.bin.into()),
         };
         glb.to_vec().map_err(|e| ExportError::Encode(e.to_string()))
+    }
+}
+
+fn contains_null(v: &Value) -> bool {
+    match v {
+        Value::Null => true,
+        Value::Array(items) => items.iter().any(contains_null),
+        Value::Object(map) => map.values().any(contains_null),
+        _ => false,
     }
 }
 

@@ -383,9 +383,22 @@ impl InstancedMesh {
                     });
                 }
             }
-            if !mat.base_color_factor.is_finite() {
+            let transform_finite = mat
+                .base_color_texture
+                .and_then(|t| t.transform)
+                .is_none_or(|x| x.offset.is_finite() && x.rotation.is_finite() && x.scale.is_finite());
+            let cutoff_finite = match mat.alpha_mode {
+                AlphaMode::Mask { cutoff } => cutoff.is_finite(),
+                _ => true,
+            };
+            if !(mat.base_color_factor.is_finite()
+                && mat.metallic_factor.is_finite()
+                && mat.roughness_factor.is_finite()
+                && transform_finite
+                && cutoff_finite)
+            {
                 return Err(InvalidMesh::NonFinite {
-                    what: format!("material {m} base colour"),
+                    what: format!("material {m} factors"),
                 });
             }
         }

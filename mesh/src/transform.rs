@@ -52,16 +52,19 @@ pub fn decompose_trs(m: &Affine3A) -> Option<Trs> {
     let rebuilt = DMat3::from_quat(rotation) * DMat3::from_diagonal(scale);
     let error = (rebuilt - l).to_cols_array().iter().fold(0.0f64, |a, e| a.max(e.abs()));
     let magnitude = l.to_cols_array().iter().fold(0.0f64, |a, e| a.max(e.abs()));
-    (error <= TRS_TOLERANCE * magnitude).then(|| Trs {
+    let trs = Trs {
         translation: Vec3::from(m.translation),
         rotation: rotation.as_quat(),
         scale: scale.as_vec3(),
-    })
+    };
+    // Column lengths of entries near f32::MAX can overflow f32 on the way back.
+    let finite = trs.scale.is_finite() && trs.rotation.is_finite();
+    (finite && error <= TRS_TOLERANCE * magnitude).then_some(trs)
 }
 
 /// Splits any affine `m` into a parent `T * U * S` and a child rotation `V^T` with
-/// `m = parent * child`, both TRS.
-pub fn decompose_svd(m: &Affine3A) -> (Trs, Quat) {
+/// `m = parent * child`, both TRS; `None` if a singular value overflows f32.
+pub fn decompose_svd(m: &Affine3A) -> Option<(Trs, Quat)> {
     let l = glam::Mat3::from(m.matrix3).as_dmat3();
     let (mut u, mut sigma, mut v) = svd3(&l);
     // Make both rotations proper; a reflection moves into the sign of one scale.
@@ -79,7 +82,8 @@ pub fn decompose_svd(m: &Affine3A) -> (Trs, Quat) {
         scale: sigma.as_vec3(),
     };
     let child = DQuat::from_mat3(&v.transpose()).normalize().as_quat();
-    (parent, child)
+    let finite = parent.scale.is_finite() && parent.rotation.is_finite() && child.is_finite();
+    finite.then_some((parent, child))
 }
 
 /// Singular value decomposition of a 3x3 matrix, `l = u * diag(sigma) * v^T`, through the
@@ -186,7 +190,7 @@ mod tests {
         // x' = x + y is a shear: no T * R * S produces it.
         let m = Affine3A::from_mat3(glam::Mat3::from_cols(Vec3::X, Vec3::new(1.0, 1.0, 0.0), Vec3::Z));
         assert!(decompose_trs(&m).is_none());
-        let (parent, child) = decompose_svd(&m);
+        let (parent, child) = decompose_svd(&m).expect("finite");
         let rebuilt = parent.to_affine() * Affine3A::from_quat(child);
         assert!(max_difference(&rebuilt, &m) < 1e-5);
     }
@@ -195,7 +199,7 @@ mod tests {
         #[test]
         fn svd_rebuilds_any_affine(cols in prop::array::uniform12(-10.0f32..10.0)) {
             let m = Affine3A::from_cols_array(&cols);
-            let (parent, child) = decompose_svd(&m);
+            let (parent, child) = decompose_svd(&m).expect("finite");
             let rebuilt = parent.to_affine() * Affine3A::from_quat(child);
             let scale = glam::Mat4::from(m).to_cols_array().iter().fold(1.0f32, |a, e| a.max(e.abs()));
             prop_assert!(max_difference(&rebuilt, &m) <= 1e-5 * scale);

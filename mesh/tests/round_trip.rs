@@ -209,3 +209,15 @@ proptest! {
         }
     }
 }
+
+#[test]
+fn extreme_transforms_export_without_overflow() {
+    // Found by the fuzzer: folding 16-bit dequantisation into a 1e36 scale overflowed f32 and
+    // wrote null into the JSON. Such a submesh now stays unquantised, and both exports re-import.
+    let huge = Affine3A::from_scale_rotation_translation(Vec3::splat(3e36), Quat::from_rotation_x(0.3), Vec3::splat(2e38));
+    let mesh = cubes(&[huge, Affine3A::IDENTITY]);
+    for compress in [false, true] {
+        let back = reimport(&mesh, compress);
+        assert_eq!(back.expanded_triangle_count(), mesh.expanded_triangle_count());
+    }
+}
