@@ -34,7 +34,10 @@ fn main() {
         images: ImageCheck::Header,
     };
     let mut rows = Vec::new();
-    for (label, export) in [("plain", ExportOptions::plain()), ("compressed", ExportOptions::compressed())] {
+    for (label, export) in [
+        ("plain", ExportOptions::plain()),
+        ("compressed", ExportOptions::compressed()),
+    ] {
         // Stage 2: export, timed.
         let (glb, export_s) = median_time(|| export_glb(&mesh, &export).expect("exports"));
         // Stage 3: import of the same bytes, timed.
@@ -70,8 +73,14 @@ fn report(rows: &[Row]) {
     println!("\n| GLB | bytes | export MB/s | import MB/s | gltf crate import MB/s | ours / gltf crate |");
     println!("|---|---|---|---|---|---|");
     for r in rows {
-        let peer = r.peer_s.map_or("n/a (cannot decode meshopt)".to_string(), |p| format!("{:.0}", mb(r.bytes, p)));
-        let ratio = r.peer_s.map_or("n/a".to_string(), |p| format!("{:.2}", p / r.import_s));
+        let peer = r
+            .peer_s
+            .map_or("n/a (cannot decode meshopt)".to_string(), |p| {
+                format!("{:.0}", mb(r.bytes, p))
+            });
+        let ratio = r
+            .peer_s
+            .map_or("n/a".to_string(), |p| format!("{:.2}", p / r.import_s));
         println!(
             "| {} | {} | {:.0} | {:.0} | {} | {} |",
             r.label,
@@ -84,7 +93,11 @@ fn report(rows: &[Row]) {
     }
     let plain = rows[0].bytes as f64;
     for r in &rows[1..] {
-        println!("\n{} size / plain size = {:.3}", r.label, r.bytes as f64 / plain);
+        println!(
+            "\n{} size / plain size = {:.3}",
+            r.label,
+            r.bytes as f64 / plain
+        );
     }
     let json: Vec<_> = rows
         .iter()
@@ -99,8 +112,11 @@ fn report(rows: &[Row]) {
         .collect();
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../target/bench");
     std::fs::create_dir_all(&dir).expect("bench dir");
-    std::fs::write(dir.join("io_throughput.json"), serde_json::to_vec_pretty(&json).expect("json"))
-        .expect("write results");
+    std::fs::write(
+        dir.join("io_throughput.json"),
+        serde_json::to_vec_pretty(&json).expect("json"),
+    )
+    .expect("write results");
 }
 
 /// Runs `f` RUNS times; returns the last result and the median seconds.
@@ -125,7 +141,9 @@ fn gltf_crate_read(glb: &[u8]) -> usize {
             let reader = prim.reader(|b| Some(&buffers[b.index()]));
             n += reader.read_positions().map_or(0, |p| p.count());
             n += reader.read_normals().map_or(0, |p| p.count());
-            n += reader.read_tex_coords(0).map_or(0, |t| t.into_f32().count());
+            n += reader
+                .read_tex_coords(0)
+                .map_or(0, |t| t.into_f32().count());
             n += reader.read_indices().map_or(0, |i| i.into_u32().count());
         }
     }

@@ -53,8 +53,10 @@ pub fn export_glb(mesh: &InstancedMesh, options: &ExportOptions) -> Result<Vec<u
         .iter()
         .zip(&by_submesh)
         .map(|(s, placed)| {
-            let transforms: Vec<Affine3A> =
-                placed.iter().map(|&k| mesh.instances[k].transform).collect();
+            let transforms: Vec<Affine3A> = placed
+                .iter()
+                .map(|&k| mesh.instances[k].transform)
+                .collect();
             w.write_submesh(s, &transforms)
         })
         .collect::<Result<_, _>>()?;
@@ -140,7 +142,7 @@ impl GlbWriter {
     }
 
     fn align_bin(&mut self) {
-        while self.bin.len() % 4 != 0 {
+        while !self.bin.len().is_multiple_of(4) {
             self.bin.push(0);
         }
     }
@@ -229,7 +231,11 @@ impl GlbWriter {
 
     /// Writes a vertex or instance attribute: its view (meshopt-encoded when compressing) and
     /// its accessor.
-    fn write_attribute(&mut self, a: &Attribute, target: Option<u32>) -> Result<usize, ExportError> {
+    fn write_attribute(
+        &mut self,
+        a: &Attribute,
+        target: Option<u32>,
+    ) -> Result<usize, ExportError> {
         let view = self.add_view(
             &a.bytes,
             target.map(|_| a.stride),
@@ -250,14 +256,20 @@ impl GlbWriter {
         };
         let n = order.len();
         // Stage 2: attributes, quantized when compressing.
-        let quantized = self.compress.then(|| quantize_positions(s, &order)).filter(|(_, d)| {
-            // Folding the dequantisation into an extreme instance transform may overflow f32;
-            // such a submesh keeps float positions.
-            d.is_finite() && placed.iter().all(|t| (*t * *d).is_finite())
-        });
+        let quantized = self
+            .compress
+            .then(|| quantize_positions(s, &order))
+            .filter(|(_, d)| {
+                // Folding the dequantisation into an extreme instance transform may overflow f32;
+                // such a submesh keeps float positions.
+                d.is_finite() && placed.iter().all(|t| (*t * *d).is_finite())
+            });
         let (position, dequantize) = quantized.unwrap_or_else(|| {
             (
-                float_attribute(order.iter().map(|&v| s.positions[v as usize].to_array()), true),
+                float_attribute(
+                    order.iter().map(|&v| s.positions[v as usize].to_array()),
+                    true,
+                ),
                 Affine3A::IDENTITY,
             )
         });
@@ -279,7 +291,9 @@ impl GlbWriter {
         }
         if let Some(uvs) = &s.uvs {
             let values = order.iter().map(|&v| uvs[v as usize].to_array());
-            let in_unit = uvs.iter().all(|t| t.cmpge(glam::Vec2::ZERO).all() && t.cmple(glam::Vec2::ONE).all());
+            let in_unit = uvs
+                .iter()
+                .all(|t| t.cmpge(glam::Vec2::ZERO).all() && t.cmple(glam::Vec2::ONE).all());
             let a = if self.compress && in_unit {
                 unorm16_attribute(values)
             } else {
@@ -306,7 +320,10 @@ impl GlbWriter {
         let bytes: Vec<u8> = if wide {
             indices.iter().flat_map(|i| i.to_le_bytes()).collect()
         } else {
-            indices.iter().flat_map(|&i| (i as u16).to_le_bytes()).collect()
+            indices
+                .iter()
+                .flat_map(|&i| (i as u16).to_le_bytes())
+                .collect()
         };
         let view = self.add_view(
             &bytes,
@@ -356,7 +373,8 @@ impl GlbWriter {
             let next = sampler_of.len();
             let sampler = *sampler_of.entry(key).or_insert(next);
             if sampler == self.samplers.len() {
-                self.samplers.push(json!({ "wrapS": key.0, "wrapT": key.1 }));
+                self.samplers
+                    .push(json!({ "wrapS": key.0, "wrapT": key.1 }));
             }
             self.textures.push(json!({
                 "source": self.images.len() - 1,
@@ -420,7 +438,9 @@ impl GlbWriter {
             if !world.iter().all(Affine3A::is_finite) {
                 // write_submesh leaves a submesh unquantised when folding would overflow, so
                 // this needs an instance transform that was not finite to begin with.
-                return Err(ExportError::Encode(format!("submesh {s}: transform overflows f32")));
+                return Err(ExportError::Encode(format!(
+                    "submesh {s}: transform overflows f32"
+                )));
             }
             let all_trs: Option<Vec<Trs>> = world.iter().map(decompose_trs).collect();
             match all_trs {
@@ -457,7 +477,8 @@ impl GlbWriter {
     fn write_matrix_node(&mut self, mesh: usize, world: &Affine3A) {
         let matrix = |a: &Affine3A| Mat4::from(*a).to_cols_array();
         if decompose_trs(world).is_some() {
-            self.nodes.push(json!({ "mesh": mesh, "matrix": matrix(world) }));
+            self.nodes
+                .push(json!({ "mesh": mesh, "matrix": matrix(world) }));
             self.roots.push(self.nodes.len() - 1);
         } else if let Some((parent, child)) = decompose_svd(world) {
             self.nodes.push(json!({
@@ -473,7 +494,8 @@ impl GlbWriter {
         } else {
             // Shear with singular values past f32's range: no TRS pair can hold it, so keep the
             // matrix itself. The transform survives; a strict validator flags the node.
-            self.nodes.push(json!({ "mesh": mesh, "matrix": matrix(world) }));
+            self.nodes
+                .push(json!({ "mesh": mesh, "matrix": matrix(world) }));
             self.roots.push(self.nodes.len() - 1);
         }
     }
@@ -529,10 +551,11 @@ impl GlbWriter {
         // serde_json writes a non-finite float as null; every number here is checked finite
         // upstream, and this keeps any miss from becoming a silently broken file.
         if contains_null(&doc) {
-            return Err(ExportError::Encode("a non-finite number reached the output".into()));
+            return Err(ExportError::Encode(
+                "a non-finite number reached the output".into(),
+            ));
         }
-        let json = serde_json::to_vec(&doc)
-            .map_err(|e| ExportError::Encode(e.to_string()))?;
+        let json = serde_json::to_vec(&doc).map_err(|e| ExportError::Encode(e.to_string()))?;
         let total = json.len() as u64 + self.bin.len() as u64 + 28;
         if total > u64::from(u32::MAX) {
             return Err(ExportError::TooLarge(total));
@@ -591,7 +614,10 @@ fn optimise_order(s: &Submesh) -> (Vec<u32>, Vec<u32>) {
 }
 
 /// Float vectors of any width, tightly packed; with `bounds`, min and max per component.
-fn float_attribute<const N: usize>(values: impl Iterator<Item = [f32; N]>, bounds: bool) -> Attribute {
+fn float_attribute<const N: usize>(
+    values: impl Iterator<Item = [f32; N]>,
+    bounds: bool,
+) -> Attribute {
     let mut bytes = Vec::new();
     let mut lo = [f32::INFINITY; N];
     let mut hi = [f32::NEG_INFINITY; N];

@@ -165,8 +165,8 @@ pub struct Texture {
 impl Texture {
     /// Decodes the image into RGBA8. This is the only place pixels are materialised.
     pub fn decode(&self) -> Result<image::RgbaImage, image::ImageError> {
-        let format = image::ImageFormat::from_mime_type(&self.mime_type)
-            .unwrap_or(image::ImageFormat::Png);
+        let format =
+            image::ImageFormat::from_mime_type(&self.mime_type).unwrap_or(image::ImageFormat::Png);
         Ok(image::load_from_memory_with_format(&self.bytes, format)?.to_rgba8())
     }
 }
@@ -383,10 +383,12 @@ impl InstancedMesh {
                     });
                 }
             }
-            let transform_finite = mat
-                .base_color_texture
-                .and_then(|t| t.transform)
-                .is_none_or(|x| x.offset.is_finite() && x.rotation.is_finite() && x.scale.is_finite());
+            let transform_finite =
+                mat.base_color_texture
+                    .and_then(|t| t.transform)
+                    .is_none_or(|x| {
+                        x.offset.is_finite() && x.rotation.is_finite() && x.scale.is_finite()
+                    });
             let cutoff_finite = match mat.alpha_mode {
                 AlphaMode::Mask { cutoff } => cutoff.is_finite(),
                 _ => true,
@@ -448,7 +450,7 @@ impl Submesh {
 
     fn validate(&self, s: usize) -> Result<(), InvalidMesh> {
         let n = self.positions.len();
-        if self.indices.len() % 3 != 0 {
+        if !self.indices.len().is_multiple_of(3) {
             return Err(InvalidMesh::PartialTriangle {
                 submesh: s,
                 count: self.indices.len(),

@@ -34,13 +34,10 @@ const TRS_TOLERANCE: f64 = 1e-6;
 /// Splits `m` into `T * R * S` if it has no shear, within [`TRS_TOLERANCE`].
 pub fn decompose_trs(m: &Affine3A) -> Option<Trs> {
     let l = glam::Mat3::from(m.matrix3).as_dmat3();
-    let mut scale = DVec3::new(
-        l.x_axis.length(),
-        l.y_axis.length(),
-        l.z_axis.length(),
-    );
+    let mut scale = DVec3::new(l.x_axis.length(), l.y_axis.length(), l.z_axis.length());
     let largest = scale.max_element();
-    if !(scale.min_element() > largest * 1e-12) {
+    // (written so that NaN also takes this branch)
+    if scale.min_element().partial_cmp(&(largest * 1e-12)) != Some(std::cmp::Ordering::Greater) {
         // A zero scale leaves the rotation undetermined; a matrix node expresses it fine.
         return None;
     }
@@ -50,7 +47,10 @@ pub fn decompose_trs(m: &Affine3A) -> Option<Trs> {
     let r = DMat3::from_cols(l.x_axis / scale.x, l.y_axis / scale.y, l.z_axis / scale.z);
     let rotation = DQuat::from_mat3(&r).normalize();
     let rebuilt = DMat3::from_quat(rotation) * DMat3::from_diagonal(scale);
-    let error = (rebuilt - l).to_cols_array().iter().fold(0.0f64, |a, e| a.max(e.abs()));
+    let error = (rebuilt - l)
+        .to_cols_array()
+        .iter()
+        .fold(0.0f64, |a, e| a.max(e.abs()));
     let magnitude = l.to_cols_array().iter().fold(0.0f64, |a, e| a.max(e.abs()));
     let trs = Trs {
         translation: Vec3::from(m.translation),
@@ -138,16 +138,14 @@ fn symmetric_eigen(a: &DMat3) -> (DMat3, DVec3) {
             let c = 1.0 / (t * t + 1.0).sqrt();
             let s = t * c;
             // m <- J^T m J with J the rotation in the (p, q) plane.
-            for k in 0..3 {
-                let (mkp, mkq) = (m[k][p], m[k][q]);
-                m[k][p] = c * mkp - s * mkq;
-                m[k][q] = s * mkp + c * mkq;
+            for row in &mut m {
+                let (mkp, mkq) = (row[p], row[q]);
+                row[p] = c * mkp - s * mkq;
+                row[q] = s * mkp + c * mkq;
             }
-            for k in 0..3 {
-                let (mpk, mqk) = (m[p][k], m[q][k]);
-                m[p][k] = c * mpk - s * mqk;
-                m[q][k] = s * mpk + c * mqk;
-            }
+            let (mp, mq) = (m[p], m[q]);
+            m[p] = std::array::from_fn(|k| c * mp[k] - s * mq[k]);
+            m[q] = std::array::from_fn(|k| s * mp[k] + c * mq[k]);
             for row in &mut v {
                 let (vp, vq) = (row[p], row[q]);
                 row[p] = c * vp - s * vq;
@@ -188,7 +186,11 @@ mod tests {
     #[test]
     fn shear_is_not_trs_but_splits_into_two() {
         // x' = x + y is a shear: no T * R * S produces it.
-        let m = Affine3A::from_mat3(glam::Mat3::from_cols(Vec3::X, Vec3::new(1.0, 1.0, 0.0), Vec3::Z));
+        let m = Affine3A::from_mat3(glam::Mat3::from_cols(
+            Vec3::X,
+            Vec3::new(1.0, 1.0, 0.0),
+            Vec3::Z,
+        ));
         assert!(decompose_trs(&m).is_none());
         let (parent, child) = decompose_svd(&m).expect("finite");
         let rebuilt = parent.to_affine() * Affine3A::from_quat(child);

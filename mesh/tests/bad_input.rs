@@ -30,24 +30,64 @@ fn truncated_glb_is_truncated() {
     let bytes = Fixture::triangle().glb();
     // Cut inside the binary chunk: the header still declares the full length.
     let cut = &bytes[..bytes.len() - 10];
-    assert_eq!(kind(import_bytes(cut, Format::Glb, None, &ImportOptions::default())), "truncated");
+    assert_eq!(
+        kind(import_bytes(
+            cut,
+            Format::Glb,
+            None,
+            &ImportOptions::default()
+        )),
+        "truncated"
+    );
     // Cut inside the 12-byte header.
-    assert_eq!(kind(import_bytes(&bytes[..7], Format::Glb, None, &ImportOptions::default())), "truncated");
+    assert_eq!(
+        kind(import_bytes(
+            &bytes[..7],
+            Format::Glb,
+            None,
+            &ImportOptions::default()
+        )),
+        "truncated"
+    );
 }
 
 #[test]
 fn garbage_and_wrong_magic_are_bad_magic() {
     let garbage: Vec<u8> = (0..500u32).map(|i| (i * 97 % 251) as u8 + 1).collect();
-    assert_eq!(kind(import_bytes(&garbage, Format::Glb, None, &ImportOptions::default())), "bad_magic");
+    assert_eq!(
+        kind(import_bytes(
+            &garbage,
+            Format::Glb,
+            None,
+            &ImportOptions::default()
+        )),
+        "bad_magic"
+    );
     let mut bytes = Fixture::triangle().glb();
     bytes[3] = b'X'; // "glTX"
-    assert_eq!(kind(import_bytes(&bytes, Format::Glb, None, &ImportOptions::default())), "bad_magic");
+    assert_eq!(
+        kind(import_bytes(
+            &bytes,
+            Format::Glb,
+            None,
+            &ImportOptions::default()
+        )),
+        "bad_magic"
+    );
 }
 
 #[test]
 fn broken_json_is_json() {
     let bytes = br#"{"asset": {"version": "2.0"}, "nodes": [ "#;
-    assert_eq!(kind(import_bytes(bytes, Format::Gltf, None, &ImportOptions::default())), "json");
+    assert_eq!(
+        kind(import_bytes(
+            bytes,
+            Format::Gltf,
+            None,
+            &ImportOptions::default()
+        )),
+        "json"
+    );
     // Well-formed JSON that breaks the schema (a node's mesh is a string).
     let mut f = Fixture::triangle();
     f.json["nodes"][0]["mesh"] = json!("zero");
@@ -115,8 +155,14 @@ fn infinite_node_transform_is_non_finite() {
 #[test]
 fn nan_gpu_instance_transform_is_non_finite() {
     let mut f = Fixture::triangle();
-    let a = f.add_accessor(&f32_bytes(&[0.0, 0.0, 0.0, f32::NAN, 0.0, 0.0]), 5126, 2, "VEC3");
-    f.json["nodes"][0]["extensions"] = json!({"EXT_mesh_gpu_instancing": {"attributes": {"TRANSLATION": a}}});
+    let a = f.add_accessor(
+        &f32_bytes(&[0.0, 0.0, 0.0, f32::NAN, 0.0, 0.0]),
+        5126,
+        2,
+        "VEC3",
+    );
+    f.json["nodes"][0]["extensions"] =
+        json!({"EXT_mesh_gpu_instancing": {"attributes": {"TRANSLATION": a}}});
     assert_eq!(kind(f.import()), "non_finite");
 }
 
@@ -136,14 +182,20 @@ fn a_shared_child_is_not_a_cycle() {
     // Nodes 0 and 1 both hold node 2: a DAG, drawn twice, not a cycle.
     let mut f = Fixture::triangle();
     f.json["scenes"][0]["nodes"] = json!([0, 1]);
-    f.json["nodes"] = json!([{"children": [2]}, {"children": [2], "translation": [5, 0, 0]}, {"mesh": 0}]);
+    f.json["nodes"] =
+        json!([{"children": [2]}, {"children": [2], "translation": [5, 0, 0]}, {"mesh": 0}]);
     let imported = f.import().expect("a DAG is fine");
     assert_eq!(imported.mesh.instances.len(), 2);
 }
 
 #[test]
 fn remote_and_escaping_uris_are_forbidden() {
-    for uri in ["http://example.com/a.bin", "https://example.com/a.bin", "../outside.bin", "/etc/passwd"] {
+    for uri in [
+        "http://example.com/a.bin",
+        "https://example.com/a.bin",
+        "../outside.bin",
+        "/etc/passwd",
+    ] {
         let mut f = Fixture::triangle();
         f.json["buffers"][0]["uri"] = json!(uri);
         let bytes = serde_json::to_vec(&f.json).expect("json");
@@ -166,11 +218,17 @@ fn a_symlink_out_of_the_folder_is_forbidden() {
     f.json["buffers"][0]["uri"] = json!("inside.bin");
     let path = dir.join("model.gltf");
     std::fs::write(&path, serde_json::to_vec(&f.json).expect("json")).expect("write");
-    assert_eq!(kind(import_file(&path, &ImportOptions::default())), "forbidden_uri");
+    assert_eq!(
+        kind(import_file(&path, &ImportOptions::default())),
+        "forbidden_uri"
+    );
     // The same file, really inside the folder, is read.
     std::fs::remove_file(&link).expect("unlink");
     std::fs::copy(&outside, &link).expect("copy");
-    assert_eq!(kind(import_file(&path, &ImportOptions::default())), "accepted");
+    assert_eq!(
+        kind(import_file(&path, &ImportOptions::default())),
+        "accepted"
+    );
     let _ = std::fs::remove_dir_all(&dir);
     let _ = std::fs::remove_file(&outside);
 }
@@ -179,7 +237,10 @@ fn a_symlink_out_of_the_folder_is_forbidden() {
 fn with_image(bytes: &[u8], mime: &str) -> Fixture {
     let mut f = Fixture::triangle();
     let offset = f.append(bytes);
-    f.json["bufferViews"].as_array_mut().expect("array").push(json!({"buffer": 0, "byteOffset": offset, "byteLength": bytes.len()}));
+    f.json["bufferViews"]
+        .as_array_mut()
+        .expect("array")
+        .push(json!({"buffer": 0, "byteOffset": offset, "byteLength": bytes.len()}));
     let view = f.json["bufferViews"].as_array().expect("array").len() - 1;
     f.json["images"] = json!([{"bufferView": view, "mimeType": mime}]);
     f.json["textures"] = json!([{"source": 0}]);
@@ -191,7 +252,8 @@ fn with_image(bytes: &[u8], mime: &str) -> Fixture {
 fn png(width: u32, height: u32) -> Vec<u8> {
     let img = image::RgbaImage::from_pixel(width, height, image::Rgba([200, 100, 50, 255]));
     let mut out = std::io::Cursor::new(Vec::new());
-    img.write_to(&mut out, image::ImageFormat::Png).expect("encodes");
+    img.write_to(&mut out, image::ImageFormat::Png)
+        .expect("encodes");
     out.into_inner()
 }
 
@@ -203,11 +265,20 @@ fn an_image_that_fails_to_decode_is_image_decode() {
     for b in &mut bytes[40..body] {
         *b ^= 0x5A;
     }
-    assert_eq!(kind(with_image(&bytes, "image/png").import()), "image_decode");
+    assert_eq!(
+        kind(with_image(&bytes, "image/png").import()),
+        "image_decode"
+    );
     // Not an image at all.
-    assert_eq!(kind(with_image(b"this is not an image", "image/png").import()), "image_decode");
+    assert_eq!(
+        kind(with_image(b"this is not an image", "image/png").import()),
+        "image_decode"
+    );
     // A good image is accepted, so the failures above come from the bytes.
-    assert_eq!(kind(with_image(&png(8, 8), "image/png").import()), "accepted");
+    assert_eq!(
+        kind(with_image(&png(8, 8), "image/png").import()),
+        "accepted"
+    );
 }
 
 #[test]
@@ -215,7 +286,10 @@ fn every_limit_is_enforced() {
     let strict = |edit: fn(&mut Limits)| {
         let mut limits = Limits::default();
         edit(&mut limits);
-        ImportOptions { limits, ..Default::default() }
+        ImportOptions {
+            limits,
+            ..Default::default()
+        }
     };
     let bytes = with_image(&png(16, 16), "image/png").glb();
     let run = |o: ImportOptions| kind(import_bytes(&bytes, Format::Glb, None, &o));
@@ -223,10 +297,19 @@ fn every_limit_is_enforced() {
     assert_eq!(run(strict(|l| l.max_triangles = 0)), "limit_exceeded");
     assert_eq!(run(strict(|l| l.max_instances = 0)), "limit_exceeded");
     assert_eq!(run(strict(|l| l.max_textures = 0)), "limit_exceeded");
-    assert_eq!(run(strict(|l| l.max_texture_pixels = 255)), "limit_exceeded");
+    assert_eq!(
+        run(strict(|l| l.max_texture_pixels = 255)),
+        "limit_exceeded"
+    );
     // At exactly the sizes of this file every limit passes: 1 triangle, 1 instance, 256 px.
     let exact = ImportOptions {
-        limits: Limits { max_bytes: bytes.len() as u64, max_triangles: 1, max_instances: 1, max_textures: 1, max_texture_pixels: 256 },
+        limits: Limits {
+            max_bytes: bytes.len() as u64,
+            max_triangles: 1,
+            max_instances: 1,
+            max_textures: 1,
+            max_texture_pixels: 256,
+        },
         ..Default::default()
     };
     assert_eq!(run(exact), "accepted");
@@ -236,7 +319,10 @@ fn every_limit_is_enforced() {
 fn an_instance_bomb_stops_at_the_instance_limit() {
     // A chain of 40 nodes each holding the next twice would be 2^40 placements.
     let mut f = Fixture::triangle();
-    let nodes: Vec<_> = (0..40).map(|i| json!({"children": [i + 1, i + 1]})).chain([json!({"mesh": 0})]).collect();
+    let nodes: Vec<_> = (0..40)
+        .map(|i| json!({"children": [i + 1, i + 1]}))
+        .chain([json!({"mesh": 0})])
+        .collect();
     f.json["nodes"] = json!(nodes);
     assert_eq!(kind(f.import()), "limit_exceeded");
 }
@@ -253,9 +339,28 @@ fn unsupported_required_extension_is_unsupported() {
 fn bad_ply_obj_and_stl_are_parse_errors_or_index_errors() {
     let opts = ImportOptions::default();
     let ply = b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n3 0 1 2\n";
-    assert_eq!(kind(import_bytes(ply, Format::Ply, None, &opts)), "index_out_of_range");
-    assert_eq!(kind(import_bytes(b"ply\nformat nonsense\n", Format::Ply, None, &opts)), "parse");
-    assert_eq!(kind(import_bytes(b"solid x\nfacet normal oops\n", Format::Stl, None, &opts)), "parse");
+    assert_eq!(
+        kind(import_bytes(ply, Format::Ply, None, &opts)),
+        "index_out_of_range"
+    );
+    assert_eq!(
+        kind(import_bytes(
+            b"ply\nformat nonsense\n",
+            Format::Ply,
+            None,
+            &opts
+        )),
+        "parse"
+    );
+    assert_eq!(
+        kind(import_bytes(
+            b"solid x\nfacet normal oops\n",
+            Format::Stl,
+            None,
+            &opts
+        )),
+        "parse"
+    );
     // Face indices past the vertices.
     let obj = b"v 0 0 0\nv 1 0 0\nf 1 2 9\n";
     let k = kind(import_bytes(obj, Format::Obj, None, &opts));
@@ -268,5 +373,13 @@ fn empty_input_is_refused_cleanly() {
     for format in [Format::Glb, Format::Gltf] {
         assert_eq!(kind(import_bytes(b"", format, None, &opts)), "truncated");
     }
-    assert_eq!(kind(import_bytes(&glb(&json!({"asset": {"version": "2.0"}}), &[]), Format::Glb, None, &opts)), "accepted");
+    assert_eq!(
+        kind(import_bytes(
+            &glb(&json!({"asset": {"version": "2.0"}}), &[]),
+            Format::Glb,
+            None,
+            &opts
+        )),
+        "accepted"
+    );
 }

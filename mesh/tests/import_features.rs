@@ -20,14 +20,18 @@ fn shared_mesh_nodes_become_one_submesh_with_two_instances() {
     f.json["nodes"] = json!([{"mesh": 0}, {"mesh": 0, "translation": [2, 0, 0]}]);
     let m = f.import().expect("imports").mesh;
     assert_eq!((m.submeshes.len(), m.instances.len()), (1, 2));
-    assert_eq!(m.instances[1].transform.translation, Vec3::new(2.0, 0.0, 0.0).into());
+    assert_eq!(
+        m.instances[1].transform.translation,
+        Vec3::new(2.0, 0.0, 0.0).into()
+    );
 }
 
 #[test]
 fn transforms_are_products_from_the_root() {
     // Parent scales by 2, child translates by 1 along x: the child's origin lands at x = 2.
     let mut f = Fixture::triangle();
-    f.json["nodes"] = json!([{"scale": [2, 2, 2], "children": [1]}, {"mesh": 0, "translation": [1, 0, 0]}]);
+    f.json["nodes"] =
+        json!([{"scale": [2, 2, 2], "children": [1]}, {"mesh": 0, "translation": [1, 0, 0]}]);
     let m = f.import().expect("imports").mesh;
     let t = m.instances[0].transform;
     assert!((t.transform_point3(Vec3::ZERO) - Vec3::new(2.0, 0.0, 0.0)).length() < 1e-6);
@@ -67,7 +71,10 @@ fn points_and_lines_are_skipped_and_counted() {
     let imported = f.import().expect("imports");
     assert_eq!(imported.skipped_non_triangle, 2);
     assert_eq!(imported.mesh.submeshes.len(), 1);
-    assert!(imported.warnings.iter().any(|w| w.contains("2 point or line")));
+    assert!(imported
+        .warnings
+        .iter()
+        .any(|w| w.contains("2 point or line")));
 }
 
 #[test]
@@ -86,7 +93,10 @@ fn sparse_accessors_replace_their_elements() {
     assert_eq!(m.submeshes[0].positions[2], Vec3::new(0.0, 5.0, 0.0));
     // A sparse index past the element count is refused.
     f.bin[idx_off] = 9;
-    assert_eq!(f.import().expect_err("out of range").kind(), "out_of_bounds");
+    assert_eq!(
+        f.import().expect_err("out of range").kind(),
+        "out_of_bounds"
+    );
 }
 
 #[test]
@@ -101,21 +111,32 @@ fn quantized_positions_and_normalized_instance_rotations_are_read() {
         pos.extend_from_slice(&[0, 0]);
     }
     let off = f.append(&pos);
-    f.json["bufferViews"].as_array_mut().expect("array").push(json!({"buffer": 0, "byteOffset": off, "byteLength": 24, "byteStride": 8}));
-    f.json["accessors"][0] = json!({"bufferView": 2, "componentType": 5123, "count": 3, "type": "VEC3"});
+    f.json["bufferViews"]
+        .as_array_mut()
+        .expect("array")
+        .push(json!({"buffer": 0, "byteOffset": off, "byteLength": 24, "byteStride": 8}));
+    f.json["accessors"][0] =
+        json!({"bufferView": 2, "componentType": 5123, "count": 3, "type": "VEC3"});
     // Rotation of 90 degrees about z as normalized i16: (0, 0, 0.7071, 0.7071).
     let q = (0.70710678f32 * 32767.0).round() as i16;
-    let rot: Vec<u8> = [0i16, 0, q, q].iter().flat_map(|v| v.to_le_bytes()).collect();
+    let rot: Vec<u8> = [0i16, 0, q, q]
+        .iter()
+        .flat_map(|v| v.to_le_bytes())
+        .collect();
     let r = f.add_accessor(&rot, 5122, 1, "VEC4");
     f.json["accessors"][r]["normalized"] = json!(true);
-    f.json["nodes"][0]["extensions"] = json!({"EXT_mesh_gpu_instancing": {"attributes": {"ROTATION": r}}});
+    f.json["nodes"][0]["extensions"] =
+        json!({"EXT_mesh_gpu_instancing": {"attributes": {"ROTATION": r}}});
     f.json["extensionsRequired"] = json!(["KHR_mesh_quantization", "EXT_mesh_gpu_instancing"]);
     f.json["extensionsUsed"] = json!(["KHR_mesh_quantization", "EXT_mesh_gpu_instancing"]);
     let m = f.import().expect("imports").mesh;
     assert_eq!(m.submeshes[0].positions[1], Vec3::new(100.0, 0.0, 0.0));
     // The rotated x axis points along y.
     let t = m.instances[0].transform;
-    assert!((t.transform_vector3(Vec3::X) - Vec3::Y).length() < 1e-4, "{t:?}");
+    assert!(
+        (t.transform_vector3(Vec3::X) - Vec3::Y).length() < 1e-4,
+        "{t:?}"
+    );
 }
 
 #[test]
@@ -124,10 +145,18 @@ fn gpu_instances_compose_with_the_node_transform() {
     let mut f = Fixture::triangle();
     let t = f.add_accessor(&f32_bytes(&[1., 0., 0., 2., 0., 0.]), 5126, 2, "VEC3");
     f.json["nodes"][0]["translation"] = json!([0, 10, 0]);
-    f.json["nodes"][0]["extensions"] = json!({"EXT_mesh_gpu_instancing": {"attributes": {"TRANSLATION": t}}});
+    f.json["nodes"][0]["extensions"] =
+        json!({"EXT_mesh_gpu_instancing": {"attributes": {"TRANSLATION": t}}});
     let m = f.import().expect("imports").mesh;
-    let origins: Vec<Vec3> = m.instances.iter().map(|i| i.transform.transform_point3(Vec3::ZERO)).collect();
-    assert_eq!(origins, vec![Vec3::new(1.0, 10.0, 0.0), Vec3::new(2.0, 10.0, 0.0)]);
+    let origins: Vec<Vec3> = m
+        .instances
+        .iter()
+        .map(|i| i.transform.transform_point3(Vec3::ZERO))
+        .collect();
+    assert_eq!(
+        origins,
+        vec![Vec3::new(1.0, 10.0, 0.0), Vec3::new(2.0, 10.0, 0.0)]
+    );
 }
 
 #[test]
@@ -142,7 +171,13 @@ fn unused_vertices_are_dropped_per_primitive() {
         {"attributes": {"POSITION": p}, "indices": i1},
         {"attributes": {"POSITION": p}, "indices": i2}]);
     let m = f.import().expect("imports").mesh;
-    assert_eq!(m.submeshes.iter().map(|s| s.positions.len()).collect::<Vec<_>>(), vec![3, 3]);
+    assert_eq!(
+        m.submeshes
+            .iter()
+            .map(|s| s.positions.len())
+            .collect::<Vec<_>>(),
+        vec![3, 3]
+    );
     // The second keeps old vertices 1, 2, 3 in their original order, so old 3 is new 2.
     assert_eq!(m.submeshes[1].positions[2], Vec3::new(1.0, 1.0, 0.0));
     assert_eq!(m.submeshes[1].indices, vec![0, 2, 1]);
@@ -152,33 +187,56 @@ fn unused_vertices_are_dropped_per_primitive() {
 fn ply_obj_and_stl_import() {
     // A unit square as two triangles in each format.
     let ply = b"ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n4 0 1 2 3\n";
-    let obj = b"v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nf 1/1 2/2 3/3 4/4\n";
+    let obj =
+        b"v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nf 1/1 2/2 3/3 4/4\n";
     let mut stl = vec![0u8; 80];
     stl.extend_from_slice(&2u32.to_le_bytes());
-    for tri in [[[0., 0., 0.], [1., 0., 0.], [1., 1., 0.]], [[0., 0., 0.], [1., 1., 0.], [0., 1., 0.]]] {
+    for tri in [
+        [[0., 0., 0.], [1., 0., 0.], [1., 1., 0.]],
+        [[0., 0., 0.], [1., 1., 0.], [0., 1., 0.]],
+    ] {
         stl.extend_from_slice(&f32_bytes(&[0., 0., 1.]));
         for v in tri {
             stl.extend_from_slice(&f32_bytes(&v));
         }
         stl.extend_from_slice(&[0, 0]);
     }
-    for (bytes, format) in [(&ply[..], Format::Ply), (&obj[..], Format::Obj), (&stl[..], Format::Stl)] {
-        let m = import_bytes(bytes, format, None, &opts()).expect("imports").mesh;
+    for (bytes, format) in [
+        (&ply[..], Format::Ply),
+        (&obj[..], Format::Obj),
+        (&stl[..], Format::Stl),
+    ] {
+        let m = import_bytes(bytes, format, None, &opts())
+            .expect("imports")
+            .mesh;
         assert_eq!(m.expanded_triangle_count(), 2, "{format:?}");
         let b = m.bounds();
-        assert_eq!((b.min, b.max), (Vec3::ZERO, Vec3::new(1.0, 1.0, 0.0)), "{format:?}");
+        assert_eq!(
+            (b.min, b.max),
+            (Vec3::ZERO, Vec3::new(1.0, 1.0, 0.0)),
+            "{format:?}"
+        );
         assert_eq!(Format::detect(None, bytes).expect("detects"), format);
     }
     // OBJ's V axis is flipped into glTF's convention.
-    let m = import_bytes(obj, Format::Obj, None, &opts()).expect("imports").mesh;
+    let m = import_bytes(obj, Format::Obj, None, &opts())
+        .expect("imports")
+        .mesh;
     let s = &m.submeshes[0];
-    let k = s.positions.iter().position(|p| *p == Vec3::ZERO).expect("origin");
+    let k = s
+        .positions
+        .iter()
+        .position(|p| *p == Vec3::ZERO)
+        .expect("origin");
     assert_eq!(s.uvs.as_ref().expect("uvs")[k], glam::Vec2::new(0.0, 1.0));
 }
 
 #[test]
 fn expansion_places_every_instance() {
-    let mesh = common::cubes(&[Affine3A::IDENTITY, Affine3A::from_rotation_translation(Quat::from_rotation_y(1.0), Vec3::X * 5.0)]);
+    let mesh = common::cubes(&[
+        Affine3A::IDENTITY,
+        Affine3A::from_rotation_translation(Quat::from_rotation_y(1.0), Vec3::X * 5.0),
+    ]);
     let e = mesh.expand();
     assert_eq!(e.indices.len() / 3, 24);
     assert_eq!(e.positions.len(), 16);

@@ -34,7 +34,8 @@ fn shared_models() -> Vec<PathBuf> {
 
 fn reimport(mesh: &InstancedMesh, compress: bool) -> InstancedMesh {
     let glb = export_glb(mesh, &ExportOptions { compress }).expect("exports");
-    let back = import_bytes(&glb, Format::Glb, None, &ImportOptions::default()).expect("re-imports");
+    let back =
+        import_bytes(&glb, Format::Glb, None, &ImportOptions::default()).expect("re-imports");
     back.mesh.validate().expect("valid");
     back.mesh
 }
@@ -50,16 +51,32 @@ fn transforms_by_submesh(mesh: &InstancedMesh) -> Vec<Vec<Affine3A>> {
 #[test]
 fn every_shared_model_round_trips_exactly_in_plain_glb() {
     let models = shared_models();
-    assert!(models.len() >= 8, "expected the eight shared models, found {models:?}");
+    assert!(
+        models.len() >= 8,
+        "expected the eight shared models, found {models:?}"
+    );
     for path in models {
-        let a = import_file(&path, &ImportOptions::default()).expect("imports").mesh;
+        let a = import_file(&path, &ImportOptions::default())
+            .expect("imports")
+            .mesh;
         let b = reimport(&a, false);
         let name = path.display();
-        assert_eq!(a.expanded_triangle_count(), b.expanded_triangle_count(), "{name}");
-        assert_eq!(a.unique_triangle_count(), b.unique_triangle_count(), "{name}");
+        assert_eq!(
+            a.expanded_triangle_count(),
+            b.expanded_triangle_count(),
+            "{name}"
+        );
+        assert_eq!(
+            a.unique_triangle_count(),
+            b.unique_triangle_count(),
+            "{name}"
+        );
         assert_eq!(a.submeshes.len(), b.submeshes.len(), "{name}");
         assert_eq!(a.materials.len(), b.materials.len(), "{name}");
-        assert!(a.textures == b.textures, "{name}: texture bytes are embedded unchanged");
+        assert!(
+            a.textures == b.textures,
+            "{name}: texture bytes are embedded unchanged"
+        );
         // Plain export writes the same vertices and indices, so submeshes match exactly
         // (normals are normalised on export; the shared models' are already unit length).
         for (sa, sb) in a.submeshes.iter().zip(&b.submeshes) {
@@ -68,7 +85,10 @@ fn every_shared_model_round_trips_exactly_in_plain_glb() {
             assert!(sa.indices == sb.indices, "{name}: indices differ");
             assert!(sa.uvs == sb.uvs, "{name}: uvs differ");
         }
-        for (ta, tb) in transforms_by_submesh(&a).iter().zip(&transforms_by_submesh(&b)) {
+        for (ta, tb) in transforms_by_submesh(&a)
+            .iter()
+            .zip(&transforms_by_submesh(&b))
+        {
             assert_eq!(ta.len(), tb.len(), "{name}");
             for (x, y) in ta.iter().zip(tb) {
                 assert!(relative_difference(x, y) <= 1e-5, "{name}: {x:?} vs {y:?}");
@@ -80,35 +100,60 @@ fn every_shared_model_round_trips_exactly_in_plain_glb() {
 #[test]
 fn every_shared_model_keeps_counts_and_bounds_when_compressed() {
     for path in shared_models() {
-        let a = import_file(&path, &ImportOptions::default()).expect("imports").mesh;
+        let a = import_file(&path, &ImportOptions::default())
+            .expect("imports")
+            .mesh;
         let b = reimport(&a, true);
         let name = path.display();
-        assert_eq!(a.expanded_triangle_count(), b.expanded_triangle_count(), "{name}");
+        assert_eq!(
+            a.expanded_triangle_count(),
+            b.expanded_triangle_count(),
+            "{name}"
+        );
         assert_eq!(a.instances.len(), b.instances.len(), "{name}");
         // 16-bit positions move a vertex by at most half a step of the largest submesh extent
         // per axis; scaled by the instance, that stays well under 1e-4 of the diagonal.
         let (ba, bb) = (a.bounds(), b.bounds());
         let tolerance = 1e-4 * ba.diagonal();
-        assert!((ba.min - bb.min).abs().max_element() <= tolerance, "{name}: {ba:?} vs {bb:?}");
-        assert!((ba.max - bb.max).abs().max_element() <= tolerance, "{name}: {ba:?} vs {bb:?}");
+        assert!(
+            (ba.min - bb.min).abs().max_element() <= tolerance,
+            "{name}: {ba:?} vs {bb:?}"
+        );
+        assert!(
+            (ba.max - bb.max).abs().max_element() <= tolerance,
+            "{name}: {ba:?} vs {bb:?}"
+        );
     }
 }
 
 #[test]
 fn compressed_is_smaller_for_real_geometry() {
     // The bunny has 16k triangles of float data: quantization and the meshopt codec must win.
-    let a = import_file(&assets().join("bunny_trimesh/bunny.ply"), &ImportOptions::default())
-        .expect("imports")
-        .mesh;
-    let plain = export_glb(&a, &ExportOptions::plain()).expect("exports").len();
-    let compressed = export_glb(&a, &ExportOptions::compressed()).expect("exports").len();
-    assert!(compressed * 2 < plain, "plain {plain} B, compressed {compressed} B");
+    let a = import_file(
+        &assets().join("bunny_trimesh/bunny.ply"),
+        &ImportOptions::default(),
+    )
+    .expect("imports")
+    .mesh;
+    let plain = export_glb(&a, &ExportOptions::plain())
+        .expect("exports")
+        .len();
+    let compressed = export_glb(&a, &ExportOptions::compressed())
+        .expect("exports")
+        .len();
+    assert!(
+        compressed * 2 < plain,
+        "plain {plain} B, compressed {compressed} B"
+    );
 }
 
 #[test]
 fn trs_instances_become_one_gpu_instanced_node() {
     // Two translated cubes: both TRS, so one node with EXT_mesh_gpu_instancing.
-    let mesh = cubes(&[Affine3A::IDENTITY, Affine3A::from_translation(Vec3::X * 3.0)]);
+    let mesh = cubes(&[
+        Affine3A::IDENTITY,
+        Affine3A::from_translation(Vec3::X * 3.0),
+    ]);
     let glb = export_glb(&mesh, &ExportOptions::plain()).expect("exports");
     let doc = gltf::Glb::from_slice(&glb).expect("glb");
     let json: serde_json::Value = serde_json::from_slice(&doc.json).expect("json");
@@ -121,7 +166,8 @@ fn trs_instances_become_one_gpu_instanced_node() {
 fn a_single_instance_is_a_matrix_node() {
     let mesh = cubes(&[Affine3A::from_translation(Vec3::Y)]);
     let glb = export_glb(&mesh, &ExportOptions::plain()).expect("exports");
-    let json: serde_json::Value = serde_json::from_slice(&gltf::Glb::from_slice(&glb).expect("glb").json).expect("json");
+    let json: serde_json::Value =
+        serde_json::from_slice(&gltf::Glb::from_slice(&glb).expect("glb").json).expect("json");
     assert!(json["nodes"][0]["matrix"].is_array());
     assert!(json.get("extensionsUsed").is_none());
 }
@@ -132,8 +178,15 @@ fn mirrored_instances_stay_mirrored_and_their_expansion_faces_out() {
     let mesh = cubes(&[Affine3A::IDENTITY, mirror]);
     for compress in [false, true] {
         let back = reimport(&mesh, compress);
-        let dets: Vec<f32> = back.instances.iter().map(|i| i.transform.matrix3.determinant()).collect();
-        assert!(dets[0] > 0.0 && dets[1] < 0.0, "compress={compress}: {dets:?}");
+        let dets: Vec<f32> = back
+            .instances
+            .iter()
+            .map(|i| i.transform.matrix3.determinant())
+            .collect();
+        assert!(
+            dets[0] > 0.0 && dets[1] < 0.0,
+            "compress={compress}: {dets:?}"
+        );
         // Expansion flips the mirrored copy's winding, so every triangle's normal still points
         // away from its cube's centre.
         let e = back.expand();
@@ -142,7 +195,10 @@ fn mirrored_instances_stay_mirrored_and_their_expansion_faces_out() {
             let inst = &back.instances[e.triangle_instance[t] as usize];
             let centre = inst.transform.transform_point3(Vec3::splat(0.5));
             let normal = (b - a).cross(c - a);
-            assert!(normal.dot((a + b + c) / 3.0 - centre) > 0.0, "compress={compress} triangle {t}");
+            assert!(
+                normal.dot((a + b + c) / 3.0 - centre) > 0.0,
+                "compress={compress} triangle {t}"
+            );
         }
     }
 }
@@ -150,7 +206,8 @@ fn mirrored_instances_stay_mirrored_and_their_expansion_faces_out() {
 #[test]
 fn sheared_instances_survive_through_a_parent_and_child_node() {
     // A rotated child under a non-uniformly scaled parent: shear, which no glTF matrix may hold.
-    let shear = Affine3A::from_scale(Vec3::new(3.0, 1.0, 1.0)) * Affine3A::from_quat(Quat::from_rotation_z(0.6));
+    let shear = Affine3A::from_scale(Vec3::new(3.0, 1.0, 1.0))
+        * Affine3A::from_quat(Quat::from_rotation_z(0.6));
     let mesh = cubes(&[shear, Affine3A::from_translation(Vec3::Z * 4.0) * shear]);
     for compress in [false, true] {
         let back = reimport(&mesh, compress);
@@ -161,7 +218,10 @@ fn sheared_instances_survive_through_a_parent_and_child_node() {
             }
         }
         let (ba, bb) = (mesh.bounds(), back.bounds());
-        assert!((ba.min - bb.min).abs().max_element() < 1e-3 && (ba.max - bb.max).abs().max_element() < 1e-3);
+        assert!(
+            (ba.min - bb.min).abs().max_element() < 1e-3
+                && (ba.max - bb.max).abs().max_element() < 1e-3
+        );
     }
 }
 
@@ -169,7 +229,12 @@ fn sheared_instances_survive_through_a_parent_and_child_node() {
 fn attributes_survive_compression_within_quantization_error() {
     let mut mesh = cubes(&[Affine3A::IDENTITY]);
     let s = &mut mesh.submeshes[0];
-    s.uvs = Some(s.positions.iter().map(|p| glam::Vec2::new(p.x, p.y)).collect());
+    s.uvs = Some(
+        s.positions
+            .iter()
+            .map(|p| glam::Vec2::new(p.x, p.y))
+            .collect(),
+    );
     s.colors = Some(s.positions.iter().map(|p| p.extend(1.0)).collect());
     let back = reimport(&mesh, true);
     let b = &back.submeshes[0];
@@ -182,16 +247,26 @@ fn attributes_survive_compression_within_quantization_error() {
             .position(|q| (inst.transform_point3(*q) - *p).length() < 1e-4)
             .expect("every vertex is kept");
         let n = mesh.submeshes[0].normals.as_ref().expect("normals")[k];
-        assert!((b.normals.as_ref().expect("normals")[j] - n).length() < 0.02, "8-bit normals");
+        assert!(
+            (b.normals.as_ref().expect("normals")[j] - n).length() < 0.02,
+            "8-bit normals"
+        );
         assert!((b.uvs.as_ref().expect("uvs")[j] - glam::Vec2::new(p.x, p.y)).length() < 1e-4);
         assert!((b.colors.as_ref().expect("colors")[j] - p.extend(1.0)).length() < 1e-4);
     }
 }
 
 fn arbitrary_transform() -> impl Strategy<Value = Affine3A> {
-    (prop::array::uniform9(-3.0f32..3.0), prop::array::uniform3(-50.0f32..50.0))
-        .prop_filter("invertible", |(m, _)| Mat3::from_cols_array(m).determinant().abs() > 1e-2)
-        .prop_map(|(m, t)| Affine3A::from_mat3_translation(Mat3::from_cols_array(&m), Vec3::from(t)))
+    (
+        prop::array::uniform9(-3.0f32..3.0),
+        prop::array::uniform3(-50.0f32..50.0),
+    )
+        .prop_filter("invertible", |(m, _)| {
+            Mat3::from_cols_array(m).determinant().abs() > 1e-2
+        })
+        .prop_map(|(m, t)| {
+            Affine3A::from_mat3_translation(Mat3::from_cols_array(&m), Vec3::from(t))
+        })
 }
 
 proptest! {
@@ -214,10 +289,17 @@ proptest! {
 fn extreme_transforms_export_without_overflow() {
     // Found by the fuzzer: folding 16-bit dequantisation into a 1e36 scale overflowed f32 and
     // wrote null into the JSON. Such a submesh now stays unquantised, and both exports re-import.
-    let huge = Affine3A::from_scale_rotation_translation(Vec3::splat(3e36), Quat::from_rotation_x(0.3), Vec3::splat(2e38));
+    let huge = Affine3A::from_scale_rotation_translation(
+        Vec3::splat(3e36),
+        Quat::from_rotation_x(0.3),
+        Vec3::splat(2e38),
+    );
     let mesh = cubes(&[huge, Affine3A::IDENTITY]);
     for compress in [false, true] {
         let back = reimport(&mesh, compress);
-        assert_eq!(back.expanded_triangle_count(), mesh.expanded_triangle_count());
+        assert_eq!(
+            back.expanded_triangle_count(),
+            mesh.expanded_triangle_count()
+        );
     }
 }

@@ -37,7 +37,10 @@ pub fn run(out: &Path) -> anyhow::Result<()> {
         let plain = export_glb(&imported.mesh, &ExportOptions::plain())?;
         let compressed = export_glb(&imported.mesh, &ExportOptions::compressed())?;
         crate::mesh_cmd::write_atomically(&out.join(format!("{name}.glb")), &plain)?;
-        crate::mesh_cmd::write_atomically(&out.join(format!("{name}.compressed.glb")), &compressed)?;
+        crate::mesh_cmd::write_atomically(
+            &out.join(format!("{name}.compressed.glb")),
+            &compressed,
+        )?;
         println!(
             "{:<20} {:>9} {:>9} {:>10} {:>10} {:>10} {:>10}",
             name,

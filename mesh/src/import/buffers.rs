@@ -97,9 +97,7 @@ impl<'a> BinaryData<'a> {
                 .and_then(|e| e.others.get("EXT_meshopt_compression"));
             if let Some(ext) = ext {
                 let ext: MeshoptView = serde_json::from_value(ext.clone()).map_err(|e| {
-                    ImportError::Json(format!(
-                        "buffer view {v}: bad EXT_meshopt_compression: {e}"
-                    ))
+                    ImportError::Json(format!("buffer view {v}: bad EXT_meshopt_compression: {e}"))
                 })?;
                 let decoded = out.decode_meshopt_view(v, view.byte_length.0, &ext, budget)?;
                 out.decoded_views[v] = Some(decoded);
@@ -175,11 +173,11 @@ impl<'a> BinaryData<'a> {
             ("ATTRIBUTES", s) if s % 4 == 0 && (4..=256).contains(&s) => {
                 crate::meshopt_stream::decode_vertex_stream(encoded, count, stride).map_err(fail)?
             }
-            ("TRIANGLES", 2) if count % 3 == 0 => {
+            ("TRIANGLES", 2) if count.is_multiple_of(3) => {
                 let ix: Vec<u16> = meshopt::decode_index_buffer(encoded, count).map_err(fail)?;
                 ix.iter().flat_map(|i| i.to_le_bytes()).collect()
             }
-            ("TRIANGLES", 4) if count % 3 == 0 => {
+            ("TRIANGLES", 4) if count.is_multiple_of(3) => {
                 let ix: Vec<u32> = meshopt::decode_index_buffer(encoded, count).map_err(fail)?;
                 ix.iter().flat_map(|i| i.to_le_bytes()).collect()
             }
@@ -248,7 +246,9 @@ pub(crate) fn read_floats(
     let what = || format!("accessor {a}");
     let component = match acc.component_type {
         Checked::Valid(c) => c.0,
-        Checked::Invalid => return Err(ImportError::Json(format!("{}: bad componentType", what()))),
+        Checked::Invalid => {
+            return Err(ImportError::Json(format!("{}: bad componentType", what())))
+        }
     };
     let components = match acc.type_ {
         Checked::Valid(Type::Scalar) => 1,
@@ -311,7 +311,10 @@ pub(crate) fn read_floats(
         let index_type = match sparse.indices.component_type {
             Checked::Valid(c) => c.0,
             Checked::Invalid => {
-                return Err(ImportError::Json(format!("{}: bad sparse index type", what())))
+                return Err(ImportError::Json(format!(
+                    "{}: bad sparse index type",
+                    what()
+                )))
             }
         };
         let (ibytes, _) = data.view(doc, sparse.indices.buffer_view.value())?;
@@ -422,12 +425,12 @@ fn component_size(c: ComponentType) -> usize {
 }
 
 /// `bytes[offset .. offset + len]`, or an error naming `what`.
-fn slice<'b>(
-    bytes: &'b [u8],
+fn slice(
+    bytes: &[u8],
     offset: u64,
     len: u64,
     what: impl Fn() -> String,
-) -> Result<&'b [u8], ImportError> {
+) -> Result<&[u8], ImportError> {
     offset
         .checked_add(len)
         .filter(|&end| end <= bytes.len() as u64)

@@ -85,7 +85,10 @@ struct Placement {
     transform: Affine3A,
 }
 
-fn split_container(bytes: &[u8]) -> Result<(Cow<'_, [u8]>, Option<Cow<'_, [u8]>>), ImportError> {
+/// The JSON chunk and the optional binary chunk of a file.
+type Chunks<'a> = (Cow<'a, [u8]>, Option<Cow<'a, [u8]>>);
+
+fn split_container(bytes: &[u8]) -> Result<Chunks<'_>, ImportError> {
     if !bytes.starts_with(b"glTF") {
         let text = bytes.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(bytes);
         let first = text.iter().find(|b| !b.is_ascii_whitespace());
@@ -104,7 +107,8 @@ fn split_container(bytes: &[u8]) -> Result<(Cow<'_, [u8]>, Option<Cow<'_, [u8]>>
             bytes.len()
         )));
     }
-    let word = |at: usize| u32::from_le_bytes([bytes[at], bytes[at + 1], bytes[at + 2], bytes[at + 3]]);
+    let word =
+        |at: usize| u32::from_le_bytes([bytes[at], bytes[at + 1], bytes[at + 2], bytes[at + 3]]);
     let (version, length) = (word(4), word(8) as usize);
     if version != 2 {
         return Err(ImportError::Unsupported(format!("GLB version {version}")));
@@ -252,7 +256,9 @@ fn count_paths(doc: &Root, roots: &[usize]) -> Result<Option<Vec<u64>>, ImportEr
     for &r in roots {
         paths[r] += 1;
     }
-    let mut ready: Vec<usize> = (0..n).filter(|&i| reachable[i] && indegree[i] == 0).collect();
+    let mut ready: Vec<usize> = (0..n)
+        .filter(|&i| reachable[i] && indegree[i] == 0)
+        .collect();
     let mut done = 0;
     while let Some(i) = ready.pop() {
         done += 1;
@@ -323,7 +329,7 @@ fn unit_quaternion(q: [f32; 4], what: impl Fn() -> String) -> Result<DQuat, Impo
     }
     let len = q.length();
     // Writers round unit quaternions; a length far from one is a broken file, not rounding.
-    if !(len > 1e-6) {
+    if len.partial_cmp(&1e-6) != Some(std::cmp::Ordering::Greater) {
         return Err(ImportError::Json(format!("{} has zero length", what())));
     }
     Ok(q / len)
@@ -400,9 +406,11 @@ fn gpu_instances(
             let tk = t.as_ref().map_or(DVec3::ZERO, |v| vec3_at(v, k).as_dvec3());
             let sk = s.as_ref().map_or(DVec3::ONE, |v| vec3_at(v, k).as_dvec3());
             let qk = match &q {
-                Some(v) => unit_quaternion([v[4 * k], v[4 * k + 1], v[4 * k + 2], v[4 * k + 3]], || {
-                    format!("{} {k}", what("ROTATION"))
-                })?,
+                Some(v) => {
+                    unit_quaternion([v[4 * k], v[4 * k + 1], v[4 * k + 2], v[4 * k + 3]], || {
+                        format!("{} {k}", what("ROTATION"))
+                    })?
+                }
                 None => DQuat::IDENTITY,
             };
             Ok(DMat4::from_scale_rotation_translation(sk, qk, tk))
@@ -428,14 +436,16 @@ struct TextureTransformExt {
     tex_coord: Option<u32>,
 }
 
-/// Materials, the textures they use (each glTF texture once), and the UV set each material's
-/// base colour texture samples.
+/// Materials, the textures they use, and the UV set each material's base colour texture samples.
+type MaterialTables = (Vec<Material>, Vec<Texture>, Vec<u32>);
+
+/// Reads the materials and the textures they use (each glTF texture once).
 fn read_materials(
     r: &Reader<'_>,
     base_dir: Option<&Path>,
     budget: &mut u64,
     options: &ImportOptions,
-) -> Result<(Vec<Material>, Vec<Texture>, Vec<u32>), ImportError> {
+) -> Result<MaterialTables, ImportError> {
     let doc = r.doc;
     let mut textures = Vec::new();
     let mut texture_slot: HashMap<usize, usize> = HashMap::new();
@@ -452,7 +462,8 @@ fn read_materials(
                 let slot = match texture_slot.get(&t) {
                     Some(&slot) => slot,
                     None => {
-                        let texture = read_texture(r, t, base_dir, budget, options, &mut pixel_budget)?;
+                        let texture =
+                            read_texture(r, t, base_dir, budget, options, &mut pixel_budget)?;
                         Limits::check(
                             "texture count",
                             textures.len() as u64 + 1,
@@ -471,9 +482,12 @@ fn read_materials(
                 let transform = match ext {
                     None => None,
                     Some(v) => {
-                        let x: TextureTransformExt = serde_json::from_value(v.clone()).map_err(|e| {
-                            ImportError::Json(format!("material {mi} KHR_texture_transform: {e}"))
-                        })?;
+                        let x: TextureTransformExt =
+                            serde_json::from_value(v.clone()).map_err(|e| {
+                                ImportError::Json(format!(
+                                    "material {mi} KHR_texture_transform: {e}"
+                                ))
+                            })?;
                         uv_set = x.tex_coord.unwrap_or(uv_set);
                         Some(UvTransform {
                             offset: Vec2::from(x.offset.unwrap_or([0.0; 2])),
@@ -602,7 +616,9 @@ fn build_instanced_mesh(
     let mut submeshes_of_mesh: HashMap<usize, Vec<usize>> = HashMap::new();
     let mut expanded = 0u64;
     for placement in placements {
-        if !submeshes_of_mesh.contains_key(&placement.mesh) {
+        if let std::collections::hash_map::Entry::Vacant(slot) =
+            submeshes_of_mesh.entry(placement.mesh)
+        {
             let mut ids = Vec::new();
             for (p, prim) in doc.meshes[placement.mesh].primitives.iter().enumerate() {
                 match convert_primitive(r, placement.mesh, p, prim, uv_sets)? {
@@ -614,7 +630,7 @@ fn build_instanced_mesh(
                     Converted::Empty => empty += 1,
                 }
             }
-            submeshes_of_mesh.insert(placement.mesh, ids);
+            slot.insert(ids);
         }
         for &submesh in &submeshes_of_mesh[&placement.mesh] {
             mesh.instances.push(Instance {
@@ -637,7 +653,9 @@ fn build_instanced_mesh(
         ));
     }
     if empty > 0 {
-        warnings.push(format!("skipped {empty} primitive(s) with no whole triangle"));
+        warnings.push(format!(
+            "skipped {empty} primitive(s) with no whole triangle"
+        ));
     }
     Ok(Imported {
         mesh,

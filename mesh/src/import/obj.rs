@@ -31,25 +31,26 @@ pub(crate) fn import(
     };
     // The MTL loader can only answer tobj with tobj's errors; keep ours to report it instead.
     let refused: Cell<Option<ImportError>> = Cell::new(None);
-    let (models, materials) = tobj::load_obj_buf(&mut BufReader::new(bytes), &load, |mtl: &Path| {
-        let mut left = budget.get();
-        let result = mtl
-            .to_str()
-            .ok_or(ImportError::ForbiddenUri {
-                uri: mtl.display().to_string(),
-                reason: "not valid UTF-8",
-            })
-            .and_then(|name| uri::resolve(name, base_dir, &mut left));
-        budget.set(left);
-        match result {
-            Ok(r) => tobj::load_mtl_buf(&mut BufReader::new(&r.bytes[..])),
-            Err(e) => {
-                refused.set(Some(e));
-                Err(tobj::LoadError::OpenFileFailed)
+    let (models, materials) =
+        tobj::load_obj_buf(&mut BufReader::new(bytes), &load, |mtl: &Path| {
+            let mut left = budget.get();
+            let result = mtl
+                .to_str()
+                .ok_or(ImportError::ForbiddenUri {
+                    uri: mtl.display().to_string(),
+                    reason: "not valid UTF-8",
+                })
+                .and_then(|name| uri::resolve(name, base_dir, &mut left));
+            budget.set(left);
+            match result {
+                Ok(r) => tobj::load_mtl_buf(&mut BufReader::new(&r.bytes[..])),
+                Err(e) => {
+                    refused.set(Some(e));
+                    Err(tobj::LoadError::OpenFileFailed)
+                }
             }
-        }
-    })
-    .map_err(parse_error)?;
+        })
+        .map_err(parse_error)?;
     if let Some(e) = refused.take() {
         return Err(e);
     }
@@ -112,7 +113,10 @@ pub(crate) fn import(
         let n = m.positions.len() / 3;
         let positions: Vec<Vec3> = m.positions.chunks_exact(3).map(Vec3::from_slice).collect();
         if positions.iter().any(|p| !p.is_finite()) {
-            return Err(ImportError::NonFinite(format!("OBJ {} positions", model.name)));
+            return Err(ImportError::NonFinite(format!(
+                "OBJ {} positions",
+                model.name
+            )));
         }
         let normals = (m.normals.len() == 3 * n && n > 0)
             .then(|| m.normals.chunks_exact(3).map(Vec3::from_slice).collect());

@@ -22,7 +22,8 @@ pub(crate) fn import(bytes: &[u8], _options: &ImportOptions) -> Result<Imported,
     let no_vertices = Vec::new();
     let vertices = ply.payload.get("vertex").unwrap_or(&no_vertices);
     // Stage 1: vertex attributes, by the property names common writers use.
-    let scalar = |v: &DefaultElement, names: &[&str]| names.iter().find_map(|n| v.get(*n).and_then(as_f64));
+    let scalar =
+        |v: &DefaultElement, names: &[&str]| names.iter().find_map(|n| v.get(*n).and_then(as_f64));
     let mut positions = Vec::with_capacity(vertices.len());
     let mut normals = Vec::new();
     let mut uvs = Vec::new();

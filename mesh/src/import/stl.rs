@@ -14,7 +14,10 @@ use crate::model::{Instance, InstancedMesh, Submesh};
 /// count, and 50 bytes per triangle.
 pub(crate) fn looks_binary(bytes: &[u8]) -> bool {
     bytes.len() >= 84
-        && u64::from(u32::from_le_bytes([bytes[80], bytes[81], bytes[82], bytes[83]])) * 50 + 84
+        && u64::from(u32::from_le_bytes([
+            bytes[80], bytes[81], bytes[82], bytes[83],
+        ])) * 50
+            + 84
             == bytes.len() as u64
 }
 

@@ -49,7 +49,7 @@ impl Fixture {
 
     /// Appends bytes to the buffer (4-byte aligned) and returns their offset.
     pub fn append(&mut self, bytes: &[u8]) -> usize {
-        while self.bin.len() % 4 != 0 {
+        while !self.bin.len().is_multiple_of(4) {
             self.bin.push(0);
         }
         let offset = self.bin.len();
@@ -59,7 +59,13 @@ impl Fixture {
     }
 
     /// Adds a buffer view and an accessor over `bytes`; returns the accessor index.
-    pub fn add_accessor(&mut self, bytes: &[u8], component_type: u32, count: usize, ty: &str) -> usize {
+    pub fn add_accessor(
+        &mut self,
+        bytes: &[u8],
+        component_type: u32,
+        count: usize,
+        ty: &str,
+    ) -> usize {
         let offset = self.append(bytes);
         let views = self.json["bufferViews"].as_array_mut().expect("array");
         views.push(json!({"buffer": 0, "byteOffset": offset, "byteLength": bytes.len()}));
@@ -98,9 +104,15 @@ pub fn f32_bytes(values: &[f32]) -> Vec<u8> {
 
 /// Largest absolute difference between two transforms, relative to the larger magnitude.
 pub fn relative_difference(a: &Affine3A, b: &Affine3A) -> f32 {
-    let (a, b) = (Mat4::from(*a).to_cols_array(), Mat4::from(*b).to_cols_array());
+    let (a, b) = (
+        Mat4::from(*a).to_cols_array(),
+        Mat4::from(*b).to_cols_array(),
+    );
     let scale = a.iter().chain(&b).fold(1e-30f32, |m, x| m.max(x.abs()));
-    a.iter().zip(&b).fold(0.0f32, |m, (x, y)| m.max((x - y).abs())) / scale
+    a.iter()
+        .zip(&b)
+        .fold(0.0f32, |m, (x, y)| m.max((x - y).abs()))
+        / scale
 }
 
 /// A unit cube (12 triangles) with normals per corner, as a submesh with no material.

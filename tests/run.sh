@@ -1,0 +1,40 @@
+#!/usr/bin/env bash
+# The project's one test command (README, .ci/run). On a fresh machine it installs what the
+# reference checks need, then runs, in order:
+#   1. cargo fmt --check and cargo clippy -D warnings over the workspace;
+#   2. cargo test over the workspace (unit, integration and property tests);
+#   3. the reference checks in tests/reference against third-party tools: the Khronos
+#      glTF-Validator (npm gltf-validator), trimesh, and an independent glTF reading in numpy.
+# The Python venv (trimesh, fast-simplification, pymeshlab, point-cloud-utils) and the npm
+# validator are installed once under $HORIZON_TOOLS (default ~/.cache/horizon-tools).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+tools="${HORIZON_TOOLS:-$HOME/.cache/horizon-tools}"
+mkdir -p "$tools"
+
+step() { printf '\n== %s\n' "$*"; }
+
+step "installing reference tools into $tools (once)"
+if [ ! -x "$tools/venv/bin/python" ]; then
+  python3 -m venv "$tools/venv"
+fi
+if ! "$tools/venv/bin/python" -c 'import trimesh, fast_simplification, pymeshlab, point_cloud_utils, numpy, scipy' 2>/dev/null; then
+  "$tools/venv/bin/pip" install --quiet --disable-pip-version-check \
+    numpy scipy trimesh fast-simplification pymeshlab point-cloud-utils
+fi
+if [ ! -d "$tools/npm/node_modules/gltf-validator" ]; then
+  mkdir -p "$tools/npm"
+  (cd "$tools/npm" && npm init -y >/dev/null && npm install --silent --no-audit --no-fund gltf-validator@2.0.0-dev.3.10 >/dev/null)
+fi
+
+step "format and lints"
+cargo fmt --all --check
+cargo clippy --workspace --all-targets --quiet -- -D warnings
+
+step "cargo test"
+cargo test --workspace --quiet
+
+step "reference checks (Khronos glTF-Validator, trimesh)"
+cargo build --release --quiet -p horizon-server
+GLTF_VALIDATOR_DIR="$tools/npm" "$tools/venv/bin/python" tests/reference/check_models.py \
+  target/release/horizon tests/reference/validate.mjs
