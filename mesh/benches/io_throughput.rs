@@ -170,7 +170,10 @@ fn generate(submeshes: usize, grid: usize, instances: usize, seed: u64) -> Insta
         for i in 0..side {
             for j in 0..side {
                 let (u, v) = (i as f32 / grid as f32, j as f32 / grid as f32);
-                let h = 0.1 * ((u * fx * 6.283).sin() * (v * fz * 6.283).cos()) + 0.01 * next();
+                let h = 0.1
+                    * ((u * fx * std::f32::consts::TAU).sin()
+                        * (v * fz * std::f32::consts::TAU).cos())
+                    + 0.01 * next();
                 positions.push(Vec3::new(u, h, v));
                 uvs.push(Vec2::new(u, v));
             }
@@ -207,7 +210,7 @@ fn generate(submeshes: usize, grid: usize, instances: usize, seed: u64) -> Insta
             if k % 3 == 2 {
                 scale.x = -scale.x;
             }
-            let rotation = Quat::from_rotation_y(next() * 6.283);
+            let rotation = Quat::from_rotation_y(next() * std::f32::consts::TAU);
             let translation = Vec3::new(s as f32 * 30.0, 0.0, k as f32 * 30.0);
             mesh.instances.push(Instance {
                 submesh: s,

@@ -118,7 +118,7 @@ fn quantized_positions_and_normalized_instance_rotations_are_read() {
     f.json["accessors"][0] =
         json!({"bufferView": 2, "componentType": 5123, "count": 3, "type": "VEC3"});
     // Rotation of 90 degrees about z as normalized i16: (0, 0, 0.7071, 0.7071).
-    let q = (0.70710678f32 * 32767.0).round() as i16;
+    let q = (std::f32::consts::FRAC_1_SQRT_2 * 32767.0).round() as i16;
     let rot: Vec<u8> = [0i16, 0, q, q]
         .iter()
         .flat_map(|v| v.to_le_bytes())
