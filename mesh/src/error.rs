@@ -7,12 +7,12 @@ use crate::model::InvalidMesh;
 #[derive(Debug, thiserror::Error)]
 pub enum ImportError {
     /// The file could not be read.
-    #[error("cannot read {path}: {source}")]
+    #[error("cannot read {path}: {reason}")]
     Io {
         /// The path that failed.
         path: String,
-        /// The OS error.
-        source: std::io::Error,
+        /// The OS error (a field, not a `source`, so a printed chain does not repeat it).
+        reason: std::io::Error,
     },
     /// The file's format could not be told from its name or its first bytes.
     #[error("unknown model format: {0}")]
@@ -142,11 +142,11 @@ pub enum ExportError {
     #[error("meshopt encoding failed: {0}")]
     Encode(String),
     /// The file could not be written.
-    #[error("cannot write {path}: {source}")]
+    #[error("cannot write {path}: {reason}")]
     Io {
         /// The path that failed.
         path: String,
         /// The OS error.
-        source: std::io::Error,
+        reason: std::io::Error,
     },
 }

@@ -163,9 +163,9 @@ pub struct Imported {
 
 /// Reads a model file, and for glTF the buffers and images beside it.
 pub fn import_file(path: &Path, options: &ImportOptions) -> Result<Imported, ImportError> {
-    let io_error = |source| ImportError::Io {
+    let io_error = |reason| ImportError::Io {
         path: path.display().to_string(),
-        source,
+        reason,
     };
     let size = std::fs::metadata(path).map_err(io_error)?.len();
     Limits::check("file size in bytes", size, options.limits.max_bytes)?;

@@ -39,9 +39,9 @@ pub(crate) fn resolve(
         });
     };
     // Stage 3: the canonical target must still be inside the canonical folder (symlinks).
-    let io_error = |source| ImportError::Io {
+    let io_error = |reason| ImportError::Io {
         path: uri.into(),
-        source,
+        reason,
     };
     let base = base.canonicalize().map_err(io_error)?;
     let full = base.join(&path).canonicalize().map_err(io_error)?;
