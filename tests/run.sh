@@ -38,3 +38,5 @@ step "reference checks (Khronos glTF-Validator, trimesh)"
 cargo build --release --quiet -p horizon-server
 GLTF_VALIDATOR_DIR="$tools/npm" "$tools/venv/bin/python" tests/reference/check_models.py \
   target/release/horizon tests/reference/validate.mjs
+GLTF_VALIDATOR_DIR="$tools/npm" "$tools/venv/bin/python" tests/reference/check_simplify.py \
+  target/release/horizon tests/reference/validate.mjs

@@ -3,11 +3,15 @@
 //! # Layout
 //! - `main.rs`: argument parsing and dispatch; every failure becomes one line on stderr and
 //!   exit status 1 (2 for usage errors, from clap).
-//! - `mesh_cmd.rs`: `horizon mesh stats` and `horizon mesh convert`.
+//! - `mesh_cmd.rs`: `horizon mesh stats`, `convert` and `distance`.
+//! - `gen_cmd.rs`: `horizon gen model`.
+//! - `simplify_cmd.rs`: `horizon simplify`.
 //! - `demo.rs`: `horizon demo`, the main job on an embedded default model set.
 
 mod demo;
+mod gen_cmd;
 mod mesh_cmd;
+mod simplify_cmd;
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -27,6 +31,29 @@ enum Command {
     /// Model tools: statistics and conversion.
     #[command(subcommand)]
     Mesh(MeshCommand),
+    /// Simplifies a model to a fraction of its expanded triangles and writes it as GLB.
+    Simplify {
+        /// A .glb, .gltf, .ply, .obj or .stl file.
+        input: PathBuf,
+        /// The .glb file to write.
+        output: PathBuf,
+        /// Fraction of the expanded triangles to keep, between 0 and 1.
+        #[arg(long)]
+        ratio: f64,
+        /// ias: instance-aware; qem: the same engine on the expanded mesh; meshopt: the
+        /// meshoptimizer baseline.
+        #[arg(long, value_enum, default_value = "ias")]
+        method: simplify_cmd::Method,
+        /// Quantize and meshopt-compress the output geometry.
+        #[arg(long)]
+        compress: bool,
+        /// Print a JSON report instead of text.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Seeded procedural workloads.
+    #[command(subcommand)]
+    Gen(GenCommand),
     /// Runs the main job on the embedded default models and writes the results to a folder.
     Demo {
         /// Where to write the demo's output.
@@ -36,11 +63,43 @@ enum Command {
 }
 
 #[derive(Debug, Subcommand)]
+enum GenCommand {
+    /// Writes one of the benchmark models shaped like the IAS paper's Table 2:
+    /// maple-tree, village-mesh, patio-chair or stonehenge.
+    Model {
+        /// The model's name.
+        name: String,
+        /// The .glb file to write.
+        output: PathBuf,
+        /// Seed of the generator: the same seed gives the same model.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Print a JSON report instead of text.
+        #[arg(long)]
+        json: bool,
+    },
+}
+
+#[derive(Debug, Subcommand)]
 enum MeshCommand {
     /// Prints submeshes, instances, triangles (unique and expanded), textures and bounds.
     Stats {
         /// A .glb, .gltf, .ply, .obj or .stl file.
         file: PathBuf,
+        /// Print JSON instead of text.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Symmetric Metro-style Hausdorff distance between two models (vertex, edge and face
+    /// samples; exact point-to-triangle distance).
+    Distance {
+        /// The reference model.
+        a: PathBuf,
+        /// The model compared with it.
+        b: PathBuf,
+        /// Area-uniform face samples per direction (edges get as many; vertices are added).
+        #[arg(long, default_value_t = 100_000)]
+        samples: usize,
         /// Print JSON instead of text.
         #[arg(long)]
         json: bool,
@@ -70,6 +129,26 @@ fn main() -> ExitCode {
             compress,
             json,
         }) => mesh_cmd::convert(&input, &output, compress, json),
+        Command::Simplify {
+            input,
+            output,
+            ratio,
+            method,
+            compress,
+            json,
+        } => simplify_cmd::run(&input, &output, ratio, method, compress, json),
+        Command::Mesh(MeshCommand::Distance {
+            a,
+            b,
+            samples,
+            json,
+        }) => mesh_cmd::distance(&a, &b, samples, json),
+        Command::Gen(GenCommand::Model {
+            name,
+            output,
+            seed,
+            json,
+        }) => gen_cmd::model(&name, &output, seed, json),
         Command::Demo { out } => demo::run(&out),
     };
     match result {

@@ -102,3 +102,29 @@ pub fn write_atomically(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
     std::fs::write(&tmp, bytes).with_context(|| format!("cannot write {}", tmp.display()))?;
     std::fs::rename(&tmp, path).with_context(|| format!("cannot write {}", path.display()))
 }
+
+/// Prints the symmetric Metro-style Hausdorff distance between two model files, each expanded
+/// into world space.
+pub fn distance(a: &Path, b: &Path, samples: usize, json: bool) -> anyhow::Result<()> {
+    let ma = import_file(a, &ImportOptions::default())?.mesh.expand();
+    let mb = import_file(b, &ImportOptions::default())?.mesh.expand();
+    let options = horizon_simplify::distance::DistanceOptions {
+        samples,
+        ..Default::default()
+    };
+    let report = horizon_simplify::distance::hausdorff(&ma, &mb, &options)?;
+    if json {
+        println!("{}", serde_json::to_string(&report)?);
+    } else {
+        println!(
+            "hausdorff {:.6e} ({:.4e} of the diagonal {:.4}); mean {:.4e} / {:.4e}; {:.3} s",
+            report.hausdorff,
+            report.hausdorff_rel_diag,
+            report.diagonal,
+            report.forward.mean,
+            report.backward.mean,
+            report.seconds
+        );
+    }
+    Ok(())
+}

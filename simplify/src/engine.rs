@@ -1,0 +1,972 @@
+//! The collapse engine behind IAS and the QEM baseline (Azim et al. 2014, section 6.2: the
+//! three-step algorithm; Garland and Heckbert 1997 for the collapse order).
+//!
+//! Every submesh with at least one instance is loaded into one set of global arrays:
+//! - *position vertices*, welded by exact position within a submesh: they carry the quadric and
+//!   the topology;
+//! - *wedges*, the input vertices: they carry UVs, normals and colours, so a position vertex with
+//!   two wedges sits on a seam;
+//! - triangles, as three wedges.
+//!
+//! Collapses of position-vertex edges run in one global order of cost across all submeshes.
+//! A collapse removes (degenerate triangles) x (instances of the submesh) from the expanded
+//! count. Instances never enter the loop: their effect is folded into the quadrics up front
+//! (see [`crate::weights`]), which is what makes IAS fast on heavily instanced meshes.
+
+use glam::{DVec3, Vec2, Vec3, Vec4};
+use horizon_mesh::{InstancedMesh, Submesh};
+
+use crate::options::SimplifyOptions;
+use crate::quadric::Quadric;
+use crate::radix_heap::RadixHeap;
+use crate::weights::{FlipGuard, InstanceSet};
+
+const DEAD: u32 = u32::MAX;
+
+/// Scratch memory reused between simplifications: every buffer keeps its capacity.
+#[derive(Debug, Default)]
+pub struct Workspace {
+    // Position vertices.
+    pos: Vec<DVec3>,
+    quadric: Vec<Quadric>,
+    stamp: Vec<u32>,
+    locked: Vec<bool>,
+    boundary: Vec<bool>,
+    /// Distinct wedges at each position vertex (saturating at 3), kept current.
+    wedge_count: Vec<u8>,
+    vsub: Vec<u32>,
+    // Wedges (input vertices).
+    wedge_pos: Vec<u32>,
+    uv: Vec<Vec2>,
+    normal: Vec<Vec3>,
+    color: Vec<Vec4>,
+    // Triangles, as wedges.
+    tris: Vec<[u32; 3]>,
+    alive: Vec<bool>,
+    // Triangles around each position vertex: `adj[start..start + len]`, append-only.
+    adj_start: Vec<u32>,
+    adj_len: Vec<u32>,
+    adj: Vec<u32>,
+    // Scratch.
+    mark: Vec<u32>,
+    generation: u32,
+    heap: RadixHeap<Candidate>,
+    tri_k: Vec<u32>,
+    tri_r: Vec<u32>,
+    ring: Vec<u32>,
+    pairs: Vec<[u32; 2]>,
+    // Per submesh.
+    subs: Vec<SubInfo>,
+}
+
+#[derive(Debug, Clone)]
+struct SubInfo {
+    /// Index of the submesh in the input.
+    source: usize,
+    tri_base: u32,
+    tri_end: u32,
+    instances: u64,
+    has_normals: bool,
+    has_uvs: bool,
+    has_colors: bool,
+    guard: FlipGuard,
+}
+
+/// A candidate collapse in the global queue, keyed by its cost's bits.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct Candidate {
+    p: u32,
+    q: u32,
+    stamp_p: u32,
+    stamp_q: u32,
+}
+
+/// Most wedges a removed corner vertex may carry.
+const MAX_WEDGES: usize = 8;
+/// Marks a wedge that becomes a new wedge at the kept position.
+const NEW_WEDGE: u32 = u32::MAX - 1;
+
+/// Where each wedge of the removed vertex goes: one pair, two along a seam, or one per face
+/// group at a corner (`NEW_WEDGE` for a face group that `keep` does not touch).
+#[derive(Clone, Copy, Debug)]
+struct WedgeMap {
+    pairs: [[u32; 2]; MAX_WEDGES],
+    len: usize,
+}
+
+impl Default for WedgeMap {
+    fn default() -> Self {
+        Self {
+            pairs: [[DEAD; 2]; MAX_WEDGES],
+            len: 0,
+        }
+    }
+}
+
+impl WedgeMap {
+    fn pairs(&self) -> &[[u32; 2]] {
+        &self.pairs[..self.len]
+    }
+
+    fn push(&mut self, pair: [u32; 2]) {
+        self.pairs[self.len] = pair;
+        self.len += 1;
+    }
+
+    fn target(&self, from: u32) -> Option<u32> {
+        self.pairs().iter().find(|p| p[0] == from).map(|p| p[1])
+    }
+}
+
+/// How a collapse moves its vertices.
+#[derive(Clone, Copy, Debug)]
+struct Plan {
+    keep: u32,
+    remove: u32,
+    target: DVec3,
+    cost: f64,
+    /// Both ends move to an optimal point (attributes interpolate); otherwise `remove` moves
+    /// onto `keep` (a half-edge collapse).
+    full: bool,
+}
+
+/// The outcome of a run of the collapse loop.
+#[derive(Debug, Default, Clone, Copy)]
+pub(crate) struct RunStats {
+    pub expanded: u64,
+    pub collapses: u64,
+    pub error: f64,
+}
+
+impl Workspace {
+    /// An empty workspace.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Stage 1: loads every instanced submesh of `mesh`, welds positions, and classifies
+    /// boundary, seam and non-manifold vertices. Returns the expanded triangle count loaded.
+    pub(crate) fn load(&mut self, mesh: &InstancedMesh, sets: &[InstanceSet]) -> u64 {
+        self.clear();
+        let mut expanded = 0u64;
+        for (s, (sub, set)) in mesh.submeshes.iter().zip(sets).enumerate() {
+            if set.count() == 0 || sub.indices.is_empty() {
+                continue;
+            }
+            let sub_id = self.subs.len() as u32;
+            let wedge_base = self.wedge_pos.len() as u32;
+            let tri_base = self.tris.len() as u32;
+            self.load_submesh(sub, sub_id, wedge_base);
+            let tri_end = self.tris.len() as u32;
+            expanded += u64::from(tri_end - tri_base) * set.count() as u64;
+            self.subs.push(SubInfo {
+                source: s,
+                tri_base,
+                tri_end,
+                instances: set.count() as u64,
+                has_normals: sub.normals.is_some(),
+                has_uvs: sub.uvs.is_some(),
+                has_colors: sub.colors.is_some(),
+                guard: set.flip_guard(),
+            });
+        }
+        self.alive = vec![true; self.tris.len()];
+        self.build_adjacency();
+        let n = self.pos.len();
+        self.quadric = vec![Quadric::ZERO; n];
+        self.stamp = vec![0; n];
+        self.locked = vec![false; n];
+        self.boundary = vec![false; n];
+        self.mark = vec![0; n];
+        self.generation = 0;
+        self.wedge_count = (0..n as u32).map(|v| self.wedges_at(v).0 as u8).collect();
+        expanded
+    }
+
+    fn clear(&mut self) {
+        self.pos.clear();
+        self.vsub.clear();
+        self.wedge_pos.clear();
+        self.uv.clear();
+        self.normal.clear();
+        self.color.clear();
+        self.tris.clear();
+        self.heap.clear();
+        self.subs.clear();
+        self.adj.clear();
+    }
+
+    fn load_submesh(&mut self, sub: &Submesh, sub_id: u32, wedge_base: u32) {
+        let mut weld = crate::weld::Welder::with_capacity(sub.positions.len());
+        for (i, p) in sub.positions.iter().enumerate() {
+            let next = self.pos.len() as u32;
+            let id = weld.id(*p, next);
+            if id == next {
+                self.pos.push(p.as_dvec3());
+                self.vsub.push(sub_id);
+            }
+            self.wedge_pos.push(id);
+            self.uv.push(sub.uvs.as_ref().map_or(Vec2::ZERO, |u| u[i]));
+            self.normal
+                .push(sub.normals.as_ref().map_or(Vec3::ZERO, |n| n[i]));
+            self.color
+                .push(sub.colors.as_ref().map_or(Vec4::ONE, |c| c[i]));
+        }
+        for t in sub.indices.chunks_exact(3) {
+            let w = [t[0] + wedge_base, t[1] + wedge_base, t[2] + wedge_base];
+            let p = w.map(|w| self.wedge_pos[w as usize]);
+            // A triangle with a repeated position is a point or a segment: it draws nothing
+            // and would only confuse the topology, so it is dropped (the count goes down).
+            if p[0] != p[1] && p[1] != p[2] && p[0] != p[2] {
+                self.tris.push(w);
+            }
+        }
+    }
+
+    fn build_adjacency(&mut self) {
+        let n = self.pos.len();
+        self.adj_len = vec![0; n];
+        for t in &self.tris {
+            for &w in t {
+                self.adj_len[self.wedge_pos[w as usize] as usize] += 1;
+            }
+        }
+        self.adj_start = Vec::with_capacity(n);
+        let mut acc = 0u32;
+        for &l in &self.adj_len {
+            self.adj_start.push(acc);
+            acc += l;
+        }
+        self.adj.clear();
+        self.adj.resize(acc as usize, 0);
+        let mut fill = self.adj_start.clone();
+        for (i, t) in self.tris.iter().enumerate() {
+            for &w in t {
+                let v = self.wedge_pos[w as usize] as usize;
+                self.adj[fill[v] as usize] = i as u32;
+                fill[v] += 1;
+            }
+        }
+    }
+
+    #[inline]
+    fn corner_pos(&self, w: u32) -> u32 {
+        self.wedge_pos[w as usize]
+    }
+
+    #[inline]
+    fn tri_verts(&self, t: u32) -> [u32; 3] {
+        self.tris[t as usize].map(|w| self.wedge_pos[w as usize])
+    }
+
+    fn tris_of(&self, v: u32) -> &[u32] {
+        let s = self.adj_start[v as usize] as usize;
+        &self.adj[s..s + self.adj_len[v as usize] as usize]
+    }
+
+    fn next_generation(&mut self) -> u32 {
+        if self.generation >= u32::MAX - 4 {
+            self.mark.iter_mut().for_each(|m| *m = 0);
+            self.generation = 0;
+        }
+        self.generation += 2;
+        self.generation
+    }
+
+    /// Stage 2: quadrics. Face planes come from `face_quadric` (which folds in every
+    /// instance); boundary and seam edges add constraint planes from `edge_constraint`.
+    /// Vertices on non-manifold edges are locked.
+    pub(crate) fn build_quadrics(&mut self, sets: &[InstanceSet], options: &SimplifyOptions) {
+        // Face quadrics, submesh by submesh.
+        for si in 0..self.subs.len() {
+            let info = self.subs[si].clone();
+            let set = &sets[info.source];
+            let tris = &self.tris[info.tri_base as usize..info.tri_end as usize];
+            let normals: Vec<DVec3> = tris
+                .iter()
+                .map(|t| {
+                    let [a, b, c] = t.map(|w| self.pos[self.wedge_pos[w as usize] as usize]);
+                    (b - a).cross(c - a)
+                })
+                .collect();
+            let weights = set.face_weights(&normals);
+            for (k, t) in tris.iter().enumerate() {
+                let n2 = normals[k];
+                let len = n2.length();
+                if len == 0.0 {
+                    continue;
+                }
+                let n = n2 / len;
+                let area = 0.5 * len;
+                let (w_plane, w_area) = weights[k];
+                let a = self.pos[self.wedge_pos[t[0] as usize] as usize];
+                let q =
+                    Quadric::from_plane(n, -n.dot(a), area * w_plane).with_weight(area * w_area);
+                for &w in t {
+                    let v = self.wedge_pos[w as usize] as usize;
+                    self.quadric[v] += q;
+                }
+            }
+        }
+        // Boundary, seam and non-manifold edges, found vertex by vertex.
+        let mut constraints: Vec<(u32, u32, u32, f64)> = Vec::new();
+        // (neighbour, triangle, wedge at v, wedge at neighbour)
+        let mut entries: Vec<(u32, u32, u32, u32)> = Vec::new();
+        for v in 0..self.pos.len() as u32 {
+            entries.clear();
+            for &t in self.tris_of(v) {
+                let tri = self.tris[t as usize];
+                for c in 0..3 {
+                    if self.corner_pos(tri[c]) == v {
+                        for d in [(c + 1) % 3, (c + 2) % 3] {
+                            let u = self.corner_pos(tri[d]);
+                            entries.push((u, t, tri[c], tri[d]));
+                        }
+                    }
+                }
+            }
+            entries.sort_unstable();
+            let mut i = 0;
+            while i < entries.len() {
+                let mut j = i;
+                while j < entries.len() && entries[j].0 == entries[i].0 {
+                    j += 1;
+                }
+                let u = entries[i].0;
+                let group = &entries[i..j];
+                match group.len() {
+                    1 => {
+                        self.boundary[v as usize] = true;
+                        if v < u {
+                            constraints.push((v, u, group[0].1, options.boundary_weight));
+                        }
+                    }
+                    2 => {
+                        let seam = group[0].2 != group[1].2 || group[0].3 != group[1].3;
+                        if seam && v < u {
+                            constraints.push((v, u, group[0].1, options.seam_weight));
+                            constraints.push((v, u, group[1].1, options.seam_weight));
+                        }
+                    }
+                    _ => {
+                        self.locked[v as usize] = true;
+                        self.locked[u as usize] = true;
+                    }
+                }
+                i = j;
+            }
+        }
+        for &(a, b, t, weight) in &constraints {
+            if weight <= 0.0 {
+                continue;
+            }
+            let info = &self.subs[self.vsub[a as usize] as usize];
+            let set = &sets[info.source];
+            let [p0, p1, p2] = self.tri_verts(t).map(|v| self.pos[v as usize]);
+            let n = (p1 - p0).cross(p2 - p0).normalize_or_zero();
+            if n == DVec3::ZERO {
+                continue;
+            }
+            let (pa, pb) = (self.pos[a as usize], self.pos[b as usize]);
+            let u = set.edge_constraint(pa, pb, n);
+            let u = u.map(|x| x * weight);
+            let q = Quadric::from_planes_through(u, pa, 0.0);
+            self.quadric[a as usize] += q;
+            self.quadric[b as usize] += q;
+        }
+        if options.lock_boundary {
+            for (l, &b) in self.locked.iter_mut().zip(&self.boundary) {
+                *l |= b;
+            }
+        }
+    }
+
+    /// Distinct wedges at `v` (up to two) and their count (saturating at 3).
+    fn wedges_at(&self, v: u32) -> (u32, [u32; 2]) {
+        let mut out = [DEAD; 2];
+        let mut n = 0;
+        for &t in self.tris_of(v) {
+            if !self.alive[t as usize] {
+                continue;
+            }
+            for &w in &self.tris[t as usize] {
+                if self.corner_pos(w) == v && !out[..n.min(2) as usize].contains(&w) {
+                    if n >= 2 {
+                        return (3, out);
+                    }
+                    out[n as usize] = w;
+                    n += 1;
+                }
+            }
+        }
+        (n, out)
+    }
+
+    /// Whether the edge `p q` lies on a seam: two triangles whose wedges differ at both ends.
+    fn is_seam_edge(&self, p: u32, q: u32) -> bool {
+        let mut pairs = [[DEAD; 2]; 2];
+        let mut n = 0;
+        for &t in self.tris_of(p) {
+            if !self.alive[t as usize] {
+                continue;
+            }
+            let tri = self.tris[t as usize];
+            let wp = tri.iter().find(|&&w| self.corner_pos(w) == p);
+            let wq = tri.iter().find(|&&w| self.corner_pos(w) == q);
+            if let (Some(&wp), Some(&wq)) = (wp, wq) {
+                if n == 2 {
+                    return false;
+                }
+                pairs[n] = [wp, wq];
+                n += 1;
+            }
+        }
+        n == 2 && pairs[0][0] != pairs[1][0] && pairs[0][1] != pairs[1][1]
+    }
+
+    /// The collapse of edge `p q`: which end stays, where it goes, and the cost (eq. 5),
+    /// or `None` when the seam and lock rules forbid it.
+    fn plan(&self, p: u32, q: u32) -> Option<Plan> {
+        // Roles: 0 free (one wedge), 1 on a seam (two), 2 a corner of seams (three or more
+        // wedges, e.g. a box corner with a normal per face), 3 locked (never moves).
+        let role = |v: u32| -> u8 {
+            if self.locked[v as usize] {
+                return 3;
+            }
+            match self.wedge_count[v as usize] {
+                0 | 1 => 0,
+                2 => 1,
+                _ => 2,
+            }
+        };
+        let (rp, rq) = (role(p), role(q));
+        let sum = self.quadric[p as usize] + self.quadric[q as usize];
+        let (pp, pq) = (self.pos[p as usize], self.pos[q as usize]);
+        let half = |keep: u32, remove: u32| {
+            let target = self.pos[keep as usize];
+            Some(Plan {
+                keep,
+                remove,
+                target,
+                cost: sum.eval(target),
+                full: false,
+            })
+        };
+        match (rp, rq) {
+            (0, 0) => Some(self.full_plan(p, q, &sum, pp, pq)),
+            (1, 1) => self
+                .is_seam_edge(p, q)
+                .then(|| self.full_plan(p, q, &sum, pp, pq)),
+            (_, 0) => half(p, q),
+            (0, _) => half(q, p),
+            (2 | 3, 1) => self.is_seam_edge(p, q).then(|| half(p, q)).flatten(),
+            (1, 2 | 3) => self.is_seam_edge(p, q).then(|| half(q, p)).flatten(),
+            // A corner moves onto its neighbour, each of its faces keeping its own attributes.
+            (2, 2) => {
+                let (a, b) = (half(p, q)?, half(q, p)?);
+                Some(if a.cost <= b.cost { a } else { b })
+            }
+            (3, 2) => half(p, q),
+            (2, 3) => half(q, p),
+            _ => None,
+        }
+    }
+
+    /// Optimal placement (eq. 6), falling back to the best point of the segment, which
+    /// includes the endpoints and the midpoint.
+    fn full_plan(&self, p: u32, q: u32, sum: &Quadric, pp: DVec3, pq: DVec3) -> Plan {
+        let mid = 0.5 * (pp + pq);
+        let reach = (pq - pp).length_squared() * 4.0;
+        let target = match sum.optimum() {
+            Some(x) if (x - mid).length_squared() <= reach => x,
+            _ => pp.lerp(pq, sum.best_on_segment(pp, pq)),
+        };
+        let cost = sum.eval(target);
+        Plan {
+            keep: p,
+            remove: q,
+            target,
+            cost,
+            full: true,
+        }
+    }
+
+    fn push(&mut self, p: u32, q: u32) {
+        if let Some(plan) = self.plan(p, q) {
+            let candidate = Candidate {
+                p,
+                q,
+                stamp_p: self.stamp[p as usize],
+                stamp_q: self.stamp[q as usize],
+            };
+            // The queue orders collapses by cost per instance: a collapse in a submesh drawn n
+            // times removes n times the triangles for its summed cost, so this is the error
+            // paid per expanded triangle removed. Ordering by the raw summed cost (the paper's
+            // section 6.2, step 3) would spend every cheap edge of the once-drawn submeshes
+            // first, over-simplifying a tree's trunk to spare its thousands of leaves.
+            let instances = self.subs[self.vsub[p as usize] as usize].instances.max(1);
+            let priority = plan.cost / instances as f64;
+            self.heap.push(priority.to_bits(), candidate);
+        }
+    }
+
+    /// Every current edge once, into the heap.
+    fn seed_heap(&mut self) {
+        self.heap.clear();
+        for v in 0..self.pos.len() as u32 {
+            if self.adj_len[v as usize] == 0 {
+                continue;
+            }
+            self.collect_ring(v);
+            let ring = std::mem::take(&mut self.ring);
+            for &u in ring.iter().filter(|&&u| u > v) {
+                self.push(v, u);
+            }
+            self.ring = ring;
+        }
+    }
+
+    /// The distinct neighbours of `v` into `self.ring`.
+    fn collect_ring(&mut self, v: u32) {
+        let g = self.next_generation();
+        self.ring.clear();
+        let s = self.adj_start[v as usize] as usize;
+        let e = s + self.adj_len[v as usize] as usize;
+        for i in s..e {
+            let t = self.adj[i];
+            if !self.alive[t as usize] {
+                continue;
+            }
+            for u in self.tri_verts(t) {
+                if u != v && self.mark[u as usize] != g {
+                    self.mark[u as usize] = g;
+                    self.ring.push(u);
+                }
+            }
+        }
+    }
+
+    /// Stage 3: collapses in one global order of cost until the expanded count reaches
+    /// `target`, the error bound is hit, or nothing more can collapse.
+    pub(crate) fn run(
+        &mut self,
+        expanded: u64,
+        target: u64,
+        options: &SimplifyOptions,
+    ) -> RunStats {
+        let mut stats = RunStats {
+            expanded,
+            ..RunStats::default()
+        };
+        let max_cost_error = options.max_error.unwrap_or(f64::INFINITY);
+        'rounds: while stats.expanded > target {
+            self.seed_heap();
+            let before = stats.collapses;
+            while stats.expanded > target {
+                let Some((_, c)) = self.heap.pop() else {
+                    break;
+                };
+                if self.stamp[c.p as usize] != c.stamp_p || self.stamp[c.q as usize] != c.stamp_q {
+                    continue;
+                }
+                let Some(plan) = self.plan(c.p, c.q) else {
+                    continue;
+                };
+                let keep = plan.keep as usize;
+                let weight =
+                    self.quadric[keep].weight() + self.quadric[plan.remove as usize].weight();
+                let error = if weight > 0.0 {
+                    (plan.cost / weight).sqrt()
+                } else {
+                    plan.cost.sqrt()
+                };
+                if error > max_cost_error {
+                    break 'rounds;
+                }
+                if let Some(removed) = self.try_collapse(&plan) {
+                    let sub = &self.subs[self.vsub[keep] as usize];
+                    stats.expanded -= removed * sub.instances;
+                    stats.collapses += 1;
+                    stats.error = stats.error.max(error);
+                    self.collect_ring(plan.keep);
+                    let ring = std::mem::take(&mut self.ring);
+                    for &u in &ring {
+                        self.push(plan.keep, u);
+                    }
+                    self.ring = ring;
+                }
+            }
+            if stats.collapses == before {
+                break;
+            }
+        }
+        stats
+    }
+
+    /// Checks the collapse (link condition, no duplicate faces, seams, flips) and performs it.
+    /// Returns the number of triangles removed from the submesh.
+    fn try_collapse(&mut self, plan: &Plan) -> Option<u64> {
+        let (k, r) = (plan.keep, plan.remove);
+        let mut tri_k = std::mem::take(&mut self.tri_k);
+        let mut tri_r = std::mem::take(&mut self.tri_r);
+        tri_k.clear();
+        tri_r.clear();
+        let mut edge = [DEAD; 2];
+        let mut n_edge = 0usize;
+        for &t in self.tris_of(k) {
+            if self.alive[t as usize] {
+                tri_k.push(t);
+            }
+        }
+        for &t in self.tris_of(r) {
+            if !self.alive[t as usize] {
+                continue;
+            }
+            if self.tri_verts(t).contains(&k) {
+                if n_edge == 2 {
+                    n_edge = 3;
+                    break;
+                }
+                edge[n_edge] = t;
+                n_edge += 1;
+            } else {
+                tri_r.push(t);
+            }
+        }
+        let ok = self.check(plan, &tri_k, &tri_r, &edge[..n_edge.min(2)], n_edge);
+        let result = ok.map(|map| {
+            self.apply(plan, &tri_k, &tri_r, &edge[..n_edge], map.pairs());
+            n_edge as u64
+        });
+        self.tri_k = tri_k;
+        self.tri_r = tri_r;
+        result
+    }
+
+    /// The validity checks; on success, the wedge map of `remove`'s wedges onto `keep`'s.
+    fn check(
+        &mut self,
+        plan: &Plan,
+        tri_k: &[u32],
+        tri_r: &[u32],
+        edge: &[u32],
+        n_edge: usize,
+    ) -> Option<WedgeMap> {
+        let (k, r) = (plan.keep, plan.remove);
+        if n_edge == 0 || n_edge > 2 {
+            return None;
+        }
+        if n_edge == 2 && self.boundary[k as usize] && self.boundary[r as usize] {
+            return None; // would pinch the surface at a boundary
+        }
+        // Link condition: the common neighbours are exactly the edge triangles' apexes.
+        let g = self.next_generation();
+        for &t in tri_r.iter().chain(edge) {
+            for v in self.tri_verts(t) {
+                if v != r && v != k {
+                    self.mark[v as usize] = g;
+                }
+            }
+        }
+        let mut common = 0;
+        for &t in tri_k {
+            for v in self.tri_verts(t) {
+                if v != k && v != r && self.mark[v as usize] == g {
+                    self.mark[v as usize] = g + 1;
+                    common += 1;
+                }
+            }
+        }
+        if common != n_edge {
+            return None;
+        }
+        // No two faces may become one (the tetrahedron case).
+        self.pairs.clear();
+        for &t in tri_k {
+            if edge.contains(&t) {
+                continue;
+            }
+            let mut o = self.tri_verts(t).into_iter().filter(|&v| v != k);
+            let (a, b) = (o.next().unwrap_or(DEAD), o.next().unwrap_or(DEAD));
+            self.pairs.push([a.min(b), a.max(b)]);
+        }
+        for &t in tri_r {
+            let mut o = self.tri_verts(t).into_iter().filter(|&v| v != r);
+            let (a, b) = (o.next().unwrap_or(DEAD), o.next().unwrap_or(DEAD));
+            if self.pairs.contains(&[a.min(b), a.max(b)]) {
+                return None;
+            }
+        }
+        // Wedges: where each of `remove`'s wedges goes.
+        let map = self.wedge_map(plan, edge, tri_r)?;
+        for &t in tri_r {
+            for &w in &self.tris[t as usize] {
+                if self.corner_pos(w) == r && !map.pairs().iter().any(|m| m[0] == w) {
+                    return None;
+                }
+            }
+        }
+        // No triangle may flip, in any instance.
+        let guard = &self.subs[self.vsub[k as usize] as usize].guard;
+        for &t in tri_k.iter().filter(|t| !edge.contains(t)).chain(tri_r) {
+            let v = self.tri_verts(t);
+            let old = v.map(|x| self.pos[x as usize]);
+            let new = v.map(|x| {
+                if x == k || x == r {
+                    plan.target
+                } else {
+                    self.pos[x as usize]
+                }
+            });
+            let n0 = (old[1] - old[0]).cross(old[2] - old[0]);
+            let n1 = (new[1] - new[0]).cross(new[2] - new[0]);
+            if n0 != DVec3::ZERO && !guard.same_side(n0, n1) {
+                return None;
+            }
+        }
+        Some(map)
+    }
+
+    fn wedge_map(&self, plan: &Plan, edge: &[u32], tri_r: &[u32]) -> Option<WedgeMap> {
+        let (k, r) = (plan.keep, plan.remove);
+        let at = |t: u32, v: u32| {
+            self.tris[t as usize]
+                .iter()
+                .copied()
+                .find(|&w| self.corner_pos(w) == v)
+                .unwrap_or(DEAD)
+        };
+        let (nr, wr) = self.wedges_at(r);
+        if nr == 0 {
+            return None;
+        }
+        if nr == 1 {
+            // `remove` has one wedge: it becomes the wedge `keep` shows on the edge.
+            let wk = at(edge[0], k);
+            if edge.iter().any(|&t| at(t, k) != wk) {
+                return None;
+            }
+            let mut map = WedgeMap::default();
+            map.push([wr[0], wk]);
+            return Some(map);
+        }
+        if nr == 2 {
+            // A seam vertex moves along its seam: each side keeps its own wedge.
+            if edge.len() != 2 {
+                return None;
+            }
+            let (a, b) = (
+                [at(edge[0], r), at(edge[0], k)],
+                [at(edge[1], r), at(edge[1], k)],
+            );
+            if a[0] == b[0] || a[1] == b[1] {
+                return None;
+            }
+            let mut map = WedgeMap::default();
+            map.push(a);
+            map.push(b);
+            return Some(map);
+        }
+        // A corner: wedges on the edge's faces join `keep`'s wedge there; the others become new
+        // wedges at `keep`'s position, so every face keeps its own attributes.
+        let mut map = WedgeMap::default();
+        for &e in edge {
+            let (wr, wk) = (at(e, r), at(e, k));
+            match map.target(wr) {
+                Some(existing) if existing != wk => return None,
+                Some(_) => {}
+                None => map.push([wr, wk]),
+            }
+        }
+        for &t in tri_r {
+            let wr = at(t, r);
+            if map.target(wr).is_none() {
+                if map.len == MAX_WEDGES {
+                    return None;
+                }
+                map.push([wr, NEW_WEDGE]);
+            }
+        }
+        Some(map)
+    }
+
+    /// UV and colour of a new wedge at `at`, from the plane of triangle `t` (which uses `w`):
+    /// barycentric coordinates of the projected point, extrapolated if it lies outside.
+    fn extrapolate(&self, t: u32, at: DVec3) -> (Vec2, Vec4) {
+        let tri = self.tris[t as usize];
+        let [a, b, c] = tri.map(|w| self.pos[self.wedge_pos[w as usize] as usize]);
+        let (e0, e1, d) = (b - a, c - a, at - a);
+        let (d00, d01, d11) = (e0.dot(e0), e0.dot(e1), e1.dot(e1));
+        let (d20, d21) = (d.dot(e0), d.dot(e1));
+        let denom = d00 * d11 - d01 * d01;
+        let (v, w) = if denom.abs() > 0.0 {
+            (
+                (d11 * d20 - d01 * d21) / denom,
+                (d00 * d21 - d01 * d20) / denom,
+            )
+        } else {
+            (0.0, 0.0)
+        };
+        let l = [(1.0 - v - w) as f32, v as f32, w as f32];
+        let uv = (0..3).map(|i| self.uv[tri[i] as usize] * l[i]).sum();
+        let color = (0..3).map(|i| self.color[tri[i] as usize] * l[i]).sum();
+        (uv, color)
+    }
+
+    fn apply(&mut self, plan: &Plan, tri_k: &[u32], tri_r: &[u32], edge: &[u32], map: &[[u32; 2]]) {
+        let (k, r) = (plan.keep, plan.remove);
+        let mut map: WedgeMap = {
+            let mut m = WedgeMap::default();
+            map.iter().for_each(|&p| m.push(p));
+            m
+        };
+        for i in 0..map.len {
+            let [wr, target] = map.pairs[i];
+            if target != NEW_WEDGE {
+                continue;
+            }
+            let Some(&t) = tri_r.iter().find(|&&t| self.tris[t as usize].contains(&wr)) else {
+                continue;
+            };
+            let (uv, color) = self.extrapolate(t, plan.target);
+            let id = self.wedge_pos.len() as u32;
+            self.wedge_pos.push(k);
+            self.uv.push(uv);
+            self.color.push(color);
+            self.normal.push(self.normal[wr as usize]);
+            map.pairs[i][1] = id;
+        }
+        let map = map.pairs();
+        for &t in edge {
+            self.alive[t as usize] = false;
+        }
+        for &t in tri_r {
+            for c in 0..3 {
+                let w = self.tris[t as usize][c];
+                if self.corner_pos(w) == r {
+                    if let Some(m) = map.iter().find(|m| m[0] == w) {
+                        self.tris[t as usize][c] = m[1];
+                    }
+                }
+            }
+        }
+        // Attributes: a full collapse interpolates each kept wedge towards its partner.
+        if plan.full {
+            let (pk, pr) = (self.pos[k as usize], self.pos[r as usize]);
+            let d = pr - pk;
+            let len2 = d.length_squared();
+            let t = if len2 > 0.0 {
+                ((plan.target - pk).dot(d) / len2).clamp(0.0, 1.0) as f32
+            } else {
+                0.0
+            };
+            for &[wr, wk] in map {
+                let (wr, wk) = (wr as usize, wk as usize);
+                self.uv[wk] = self.uv[wk].lerp(self.uv[wr], t);
+                self.color[wk] = self.color[wk].lerp(self.color[wr], t);
+                let n = self.normal[wk].lerp(self.normal[wr], t);
+                self.normal[wk] = if n.length_squared() > 1e-12 {
+                    n.normalize()
+                } else {
+                    self.normal[wk]
+                };
+            }
+        }
+        for &[wr, _] in map {
+            self.wedge_pos[wr as usize] = DEAD;
+        }
+        self.pos[k as usize] = plan.target;
+        let qr = self.quadric[r as usize];
+        self.quadric[k as usize] += qr;
+        self.stamp[k as usize] = self.stamp[k as usize].wrapping_add(1);
+        self.stamp[r as usize] = self.stamp[r as usize].wrapping_add(1);
+        let br = self.boundary[r as usize];
+        self.boundary[k as usize] |= br;
+        let lr = self.locked[r as usize];
+        self.locked[k as usize] |= lr;
+        // The merged triangle list goes to the end of the arena.
+        let start = self.adj.len() as u32;
+        for &t in tri_k.iter().chain(tri_r) {
+            if self.alive[t as usize] {
+                self.adj.push(t);
+            }
+        }
+        self.adj_start[k as usize] = start;
+        self.adj_len[k as usize] = self.adj.len() as u32 - start;
+        self.adj_len[r as usize] = 0;
+        // Wedge counts change at `keep` and at the apexes that lost an edge triangle; a vertex
+        // with one wedge keeps one.
+        if map.len() > 1 || self.wedge_count[k as usize] > 1 {
+            self.wedge_count[k as usize] = self.wedges_at(k).0 as u8;
+        }
+        for &t in edge {
+            for v in self.tri_verts(t) {
+                if v != k && v != r && v != DEAD && self.wedge_count[v as usize] > 1 {
+                    self.wedge_count[v as usize] = self.wedges_at(v).0 as u8;
+                }
+            }
+        }
+    }
+
+    /// Stage 4: the simplified mesh: surviving wedges of each submesh, compacted, with the
+    /// input's materials, textures and instances. Submeshes left without triangles go, with
+    /// their instances.
+    pub(crate) fn assemble(&self, mesh: &InstancedMesh) -> InstancedMesh {
+        let mut out_subs: Vec<Option<Submesh>> = mesh.submeshes.iter().cloned().map(Some).collect();
+        let mut remap = vec![DEAD; self.wedge_pos.len()];
+        for info in &self.subs {
+            let mut sub = Submesh {
+                material: mesh.submeshes[info.source].material,
+                ..Submesh::default()
+            };
+            let mut positions = Vec::new();
+            let mut normals = Vec::new();
+            let mut uvs = Vec::new();
+            let mut colors = Vec::new();
+            for t in info.tri_base..info.tri_end {
+                if !self.alive[t as usize] {
+                    continue;
+                }
+                for &w in &self.tris[t as usize] {
+                    let wi = w as usize;
+                    if remap[wi] == DEAD {
+                        remap[wi] = positions.len() as u32;
+                        positions.push(self.pos[self.wedge_pos[wi] as usize].as_vec3());
+                        normals.push(self.normal[wi]);
+                        uvs.push(self.uv[wi]);
+                        colors.push(self.color[wi]);
+                    }
+                    sub.indices.push(remap[wi]);
+                }
+            }
+            sub.positions = positions;
+            sub.normals = info.has_normals.then_some(normals);
+            sub.uvs = info.has_uvs.then_some(uvs);
+            sub.colors = info.has_colors.then_some(colors);
+            out_subs[info.source] = (!sub.indices.is_empty()).then_some(sub);
+        }
+        let mut index = vec![usize::MAX; out_subs.len()];
+        let mut submeshes = Vec::new();
+        for (i, s) in out_subs.into_iter().enumerate() {
+            if let Some(s) = s {
+                index[i] = submeshes.len();
+                submeshes.push(s);
+            }
+        }
+        let instances = mesh
+            .instances
+            .iter()
+            .filter(|i| index[i.submesh] != usize::MAX)
+            .map(|i| horizon_mesh::Instance {
+                submesh: index[i.submesh],
+                transform: i.transform,
+            })
+            .collect();
+        InstancedMesh {
+            submeshes,
+            instances,
+            materials: mesh.materials.clone(),
+            textures: mesh.textures.clone(),
+        }
+    }
+}
