@@ -5,10 +5,12 @@
 //!   exit status 1 (2 for usage errors, from clap).
 //! - `mesh_cmd.rs`: `horizon mesh stats`, `convert` and `distance`.
 //! - `gen_cmd.rs`: `horizon gen model`.
+//! - `descriptors_cmd.rs`: `horizon descriptors` and `horizon calibrate`.
 //! - `simplify_cmd.rs`: `horizon simplify`.
 //! - `demo.rs`: `horizon demo`, the main job on an embedded default model set.
 
 mod demo;
+mod descriptors_cmd;
 mod gen_cmd;
 mod mesh_cmd;
 mod simplify_cmd;
@@ -50,6 +52,35 @@ enum Command {
         /// Print a JSON report instead of text.
         #[arg(long)]
         json: bool,
+    },
+    /// Prints a model's shape descriptor (3D Zernike, 121 values) and texture descriptor
+    /// (Color Structure, 32 bins), and the time they took.
+    Descriptors {
+        /// A .glb, .gltf, .ply, .obj or .stl file.
+        file: PathBuf,
+        /// Fill the inside of closed models before computing the shape descriptor.
+        #[arg(long)]
+        solid: bool,
+        /// Print JSON instead of text.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Derives Table 1's deduplication thresholds by the paper's procedure (renders from three
+    /// directions, SSIM, every pair of models and perturbed variants) and writes table1.json
+    /// and table1.md.
+    Calibrate {
+        /// Folder to write table1.json and table1.md into.
+        #[arg(long, default_value = "descriptors/data")]
+        out: PathBuf,
+        /// Folder holding the shared models (assets/models of the repository).
+        #[arg(long, default_value = "assets/models")]
+        assets: PathBuf,
+        /// SSIM at or above which two renders count as indistinguishable.
+        #[arg(long, default_value_t = 0.95)]
+        ssim: f64,
+        /// Seeds per worldgen model (each seed is a similar but distinct model).
+        #[arg(long, default_value_t = 2)]
+        seeds: u64,
     },
     /// Seeded procedural workloads.
     #[command(subcommand)]
@@ -149,6 +180,15 @@ fn main() -> ExitCode {
             seed,
             json,
         }) => gen_cmd::model(&name, &output, seed, json),
+        Command::Descriptors { file, solid, json } => {
+            descriptors_cmd::describe_file(&file, solid, json)
+        }
+        Command::Calibrate {
+            out,
+            assets,
+            ssim,
+            seeds,
+        } => descriptors_cmd::calibrate(&assets, &out, ssim, seeds),
         Command::Demo { out } => demo::run(&out),
     };
     match result {

@@ -1,0 +1,250 @@
+//! Benchmark of issue 4's descriptor targets, written to bench/results/descriptors.{md,json}:
+//!
+//! 1. time of the full descriptor (voxelize, Zernike, CSD) per model on one core, median of 5
+//!    runs, including a 20,000-triangle textured model (DamagedHelmet simplified by IAS);
+//! 2. a batch of all models on one thread and in parallel with rayon (every core);
+//! 3. invariance: for each shared model, the largest z_diff to 20 seeded random rigid motions
+//!    with uniform scale, divided by the median z_diff between distinct shared models.
+//!
+//! Run: `cargo run --release -p horizon-descriptors --example descriptors_bench`
+//! (from the repository root).
+
+use std::fmt::Write as _;
+use std::path::Path;
+use std::time::Instant;
+
+use glam::{Affine3A, Quat, Vec3};
+use horizon_descriptors::{describe, describe_batch, z_diff, DescriptorOptions, Descriptors};
+use horizon_mesh::{import_file, ImportOptions, InstancedMesh};
+use horizon_simplify::{simplify, SimplifyOptions, Target};
+use serde::Serialize;
+
+const SHARED: &[&str] = &[
+    "bunny_trimesh/bunny.ply",
+    "BoxTextured/BoxTextured.glb",
+    "CesiumMilkTruck/CesiumMilkTruck.glb",
+    "DamagedHelmet/DamagedHelmet.glb",
+    "GlassVaseFlowers/GlassVaseFlowers.glb",
+    "SimpleInstancing/SimpleInstancing.glb",
+    "NegativeScaleTest/NegativeScaleTest.glb",
+    "GpuInstancesMetadata/GpuInstancesMetadata.gltf",
+];
+const RUNS: usize = 5;
+const MOTIONS: usize = 20;
+
+#[derive(Serialize)]
+struct TimingRow {
+    model: String,
+    triangles: u64,
+    voxels: usize,
+    median_ms: f64,
+    voxelize_ms: f64,
+    zernike_ms: f64,
+    csd_ms: f64,
+}
+
+#[derive(Serialize)]
+struct InvarianceRow {
+    model: String,
+    max_moved_z_diff: f32,
+    ratio_to_median_distinct: f32,
+}
+
+#[derive(Serialize)]
+struct Report {
+    timings: Vec<TimingRow>,
+    batch_models: usize,
+    batch_one_thread_s: f64,
+    batch_parallel_s: f64,
+    batch_threads: usize,
+    median_distinct_z_diff: f32,
+    invariance: Vec<InvarianceRow>,
+}
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let mut models: Vec<(String, InstancedMesh)> = Vec::new();
+    for rel in SHARED {
+        let mesh = import_file(
+            &root.join("assets/models").join(rel),
+            &ImportOptions::default(),
+        )?
+        .mesh;
+        models.push((rel.split('/').next().unwrap_or(rel).to_string(), mesh));
+    }
+    let helmet = models
+        .iter()
+        .find(|(n, _)| n == "DamagedHelmet")
+        .map(|(_, m)| m.clone())
+        .ok_or("DamagedHelmet missing")?;
+    let helmet_20k = simplify(
+        &helmet,
+        Target::Triangles(20_000),
+        &SimplifyOptions::default(),
+    )?
+    .mesh;
+    models.push(("DamagedHelmet-20k".into(), helmet_20k));
+    for name in ["patio-chair", "stonehenge"] {
+        models.push((name.into(), horizon_worldgen::generate_model(name, 1)?));
+    }
+    let options = DescriptorOptions::default();
+    let one = rayon::ThreadPoolBuilder::new().num_threads(1).build()?;
+
+    // 1. One core, median of RUNS.
+    let mut timings = Vec::new();
+    for (name, mesh) in &models {
+        let mut runs = one.install(|| {
+            (0..RUNS)
+                .map(|_| describe(mesh, &options))
+                .collect::<Result<Vec<_>, _>>()
+        })?;
+        runs.sort_by(|a, b| a.seconds.total_cmp(&b.seconds));
+        let m = &runs[RUNS / 2];
+        eprintln!("{name}: {:.1} ms", m.seconds * 1e3);
+        timings.push(TimingRow {
+            model: name.clone(),
+            triangles: mesh.expanded_triangle_count(),
+            voxels: m.voxels,
+            median_ms: m.seconds * 1e3,
+            voxelize_ms: m.voxelize_seconds * 1e3,
+            zernike_ms: m.zernike_seconds * 1e3,
+            csd_ms: m.csd_seconds * 1e3,
+        });
+    }
+
+    // 2. Batch: one thread against every core.
+    let meshes: Vec<InstancedMesh> = models.iter().map(|(_, m)| m.clone()).collect();
+    let started = Instant::now();
+    one.install(|| describe_batch(&meshes, &options));
+    let batch_one = started.elapsed().as_secs_f64();
+    let started = Instant::now();
+    describe_batch(&meshes, &options);
+    let batch_parallel = started.elapsed().as_secs_f64();
+
+    // 3. Invariance over random rigid motions with uniform scale.
+    let shared: Vec<(String, Descriptors)> = models[..SHARED.len()]
+        .iter()
+        .map(|(n, m)| Ok((n.clone(), describe(m, &options)?.descriptors)))
+        .collect::<Result<_, horizon_descriptors::DescriptorError>>()?;
+    let mut distinct: Vec<f32> = Vec::new();
+    for i in 0..shared.len() {
+        for j in i + 1..shared.len() {
+            distinct.push(z_diff(&shared[i].1, &shared[j].1));
+        }
+    }
+    distinct.sort_by(f32::total_cmp);
+    let median = distinct[distinct.len() / 2];
+    let mut invariance = Vec::new();
+    let mut rng = 0x5EED_u64;
+    for ((name, mesh), (_, base)) in models[..SHARED.len()].iter().zip(&shared) {
+        let moved: Vec<InstancedMesh> = (0..MOTIONS).map(|_| moved(mesh, &mut rng)).collect();
+        let worst = describe_batch(&moved, &options)
+            .into_iter()
+            .map(|r| r.map(|r| z_diff(base, &r.descriptors)))
+            .collect::<Result<Vec<_>, _>>()?
+            .into_iter()
+            .fold(0.0f32, f32::max);
+        invariance.push(InvarianceRow {
+            model: name.clone(),
+            max_moved_z_diff: worst,
+            ratio_to_median_distinct: worst / median,
+        });
+    }
+
+    let report = Report {
+        timings,
+        batch_models: meshes.len(),
+        batch_one_thread_s: batch_one,
+        batch_parallel_s: batch_parallel,
+        batch_threads: rayon::current_num_threads(),
+        median_distinct_z_diff: median,
+        invariance,
+    };
+    let out = root.join("bench/results");
+    std::fs::create_dir_all(&out)?;
+    std::fs::write(
+        out.join("descriptors.json"),
+        serde_json::to_string_pretty(&report)?,
+    )?;
+    let md = markdown(&report);
+    std::fs::write(out.join("descriptors.md"), &md)?;
+    print!("{md}");
+    Ok(())
+}
+
+/// The model under a seeded random rotation, uniform scale in [0.1, 10] and translation.
+fn moved(mesh: &InstancedMesh, rng: &mut u64) -> InstancedMesh {
+    let mut next = || {
+        *rng = rng.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = *rng;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        ((z ^ (z >> 31)) >> 11) as f32 / (1u64 << 53) as f32
+    };
+    let axis = Vec3::new(next() - 0.5, next() - 0.5, next() - 0.5).normalize_or(Vec3::Z);
+    let rotation = Quat::from_axis_angle(axis, next() * std::f32::consts::TAU);
+    let scale = 10f32.powf(next() * 2.0 - 1.0);
+    let translation = Vec3::new(next(), next(), next()) * 200.0 - 100.0;
+    let motion =
+        Affine3A::from_scale_rotation_translation(Vec3::splat(scale), rotation, translation);
+    let mut out = mesh.clone();
+    for i in &mut out.instances {
+        i.transform = motion * i.transform;
+    }
+    out
+}
+
+fn markdown(r: &Report) -> String {
+    let mut s = String::new();
+    let _ = writeln!(s, "# Descriptor benchmark (issue 4)\n");
+    let _ = writeln!(
+        s,
+        "`cargo run --release -p horizon-descriptors --example descriptors_bench`. One core \
+         (a one-thread rayon pool), median of {RUNS} runs; the target is 150 ms for a \
+         20k-triangle model.\n"
+    );
+    let _ = writeln!(
+        s,
+        "| model | expanded triangles | voxels | total ms | voxelize | Zernike | CSD |"
+    );
+    let _ = writeln!(s, "|---|---|---|---|---|---|---|");
+    for t in &r.timings {
+        let _ = writeln!(
+            s,
+            "| {} | {} | {} | {:.1} | {:.1} | {:.1} | {:.1} |",
+            t.model, t.triangles, t.voxels, t.median_ms, t.voxelize_ms, t.zernike_ms, t.csd_ms
+        );
+    }
+    let _ = writeln!(
+        s,
+        "\nBatch of {} models: {:.2} s on one thread, {:.2} s on {} threads ({:.2}x).\n",
+        r.batch_models,
+        r.batch_one_thread_s,
+        r.batch_parallel_s,
+        r.batch_threads,
+        r.batch_one_thread_s / r.batch_parallel_s
+    );
+    let _ = writeln!(
+        s,
+        "Invariance: largest z_diff over {MOTIONS} random rigid motions with uniform scale, \
+         against the median z_diff between distinct shared models ({:.4}); target <= 10%.\n",
+        r.median_distinct_z_diff
+    );
+    let _ = writeln!(s, "| model | max moved z_diff | ratio | within 10% |");
+    let _ = writeln!(s, "|---|---|---|---|");
+    for i in &r.invariance {
+        let _ = writeln!(
+            s,
+            "| {} | {:.4} | {:.1}% | {} |",
+            i.model,
+            i.max_moved_z_diff,
+            i.ratio_to_median_distinct * 100.0,
+            if i.ratio_to_median_distinct <= 0.1 {
+                "yes"
+            } else {
+                "NO"
+            }
+        );
+    }
+    s
+}
