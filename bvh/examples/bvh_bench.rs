@@ -11,6 +11,10 @@
 //!     [--queries Q] [--mu M] [--w W]
 //! ```
 //!
+//! The same viewpoints are then queried on the spatial baseline (an `obvhs` SAH BVH of the
+//! same objects with the same cut). A standing query then follows a viewer walking 1 m per step (5,000 steps) at every
+//! `Omega_min`; the median update time is reported (target 0.2 ms).
+//!
 //! Queries run at every `Omega_min` given (default 1e-2, where the 4,000 budget rarely binds
 //! on the default world, and 2e-3, where it always does), from the same seeded viewpoints,
 //! each twice: the first run is reported (cold caches), then the second (warm).
@@ -19,7 +23,8 @@ use std::time::Instant;
 
 use glam::{Affine3A, Vec3};
 use horizon_bvh::{
-    Bvh, BvhOptions, Cut, CutQuery, CutWorkspace, NewObject, Sphere, SHAPE_LEN, TEXTURE_LEN,
+    Bvh, BvhOptions, Cut, CutQuery, CutWorkspace, NewObject, SpatialBaseline, SpatialCut,
+    SpatialWorkspace, Sphere, StandingOptions, StandingQuery, SHAPE_LEN, TEXTURE_LEN,
 };
 
 /// Budget of every query (the issue's target is stated for 4,000 results).
@@ -106,6 +111,25 @@ fn main() {
         }
     }
 
+    // The spatial baseline: the same objects in an obvhs SAH BVH, the same cut.
+    let start = Instant::now();
+    let spatial = SpatialBaseline::build(&bulk);
+    println!(
+        "spatial baseline (obvhs SAH BVH, one thread): build {:.3} s, {} nodes",
+        start.elapsed().as_secs_f64(),
+        spatial.node_count()
+    );
+    for &omega in &omegas {
+        report_spatial(&spatial, omega, queries);
+    }
+
+    // Standing queries: a viewer walking 1 m per step.
+    for &omega in &omegas {
+        for (name, bvh) in [("bulk", &bulk), ("incremental", &incremental)] {
+            report_standing(name, bvh, omega, STANDING_STEPS);
+        }
+    }
+
     // Memory.
     for (name, bvh) in [("bulk", &bulk), ("incremental", &incremental)] {
         println!(
@@ -158,6 +182,86 @@ fn report_queries(name: &str, bvh: &Bvh, omega: f32, queries: usize) {
          median {t50:.3} ms, p99 {t99:.3} ms (same viewpoint again: median {w50:.3} ms, p99 \
          {w99:.3} ms); cut size median {s50:.0} (min {smin:.0}, max \
          {smax:.0}); nodes visited / cut size median {r50:.2}, max {rmax:.2}"
+    );
+}
+
+/// The same viewpoints as `report_queries`, on the spatial baseline.
+fn report_spatial(spatial: &SpatialBaseline, omega: f32, queries: usize) {
+    let mut rng = Rng(0xC0FFEE);
+    let mut workspace = SpatialWorkspace::default();
+    let mut cut = SpatialCut::default();
+    let mut times = Vec::with_capacity(queries);
+    let mut ratios = Vec::with_capacity(queries);
+    let mut sizes = Vec::with_capacity(queries);
+    let mut visited = Vec::with_capacity(queries);
+    for _ in 0..queries {
+        let position = Vec3::new(rng.range(0.0, WORLD), rng.range(0.0, WORLD), 1.7);
+        let query = CutQuery {
+            position,
+            min_solid_angle: omega,
+            max_results: MAX_RESULTS,
+        };
+        spatial.cut_into(&query, &mut workspace, &mut cut);
+        let start = Instant::now();
+        spatial.cut_into(&query, &mut workspace, &mut cut);
+        times.push(start.elapsed().as_secs_f64() * 1e3);
+        ratios.push(cut.nodes_visited as f64 / cut.entries.len() as f64);
+        sizes.push(cut.entries.len() as f64);
+        visited.push(cut.nodes_visited as f64);
+    }
+    println!(
+        "cut (spatial baseline, omega_min {omega:e}, max_results {MAX_RESULTS}, {queries} \
+         viewpoints, warm): median {:.3} ms, p99 {:.3} ms; cut size median {:.0}; nodes \
+         visited median {:.0}, / cut size median {:.2}",
+        percentile(&mut times, 0.5),
+        percentile(&mut times, 0.99),
+        percentile(&mut sizes, 0.5),
+        percentile(&mut visited, 0.5),
+        percentile(&mut ratios, 0.5),
+    );
+}
+
+/// Steps of the standing-query walk.
+const STANDING_STEPS: usize = 5_000;
+
+/// A viewer at eye height walking 1 m per step along a gently turning path from the centre of
+/// the world, with a standing query (hysteresis 0.1, the 4,000 budget). The first update (the
+/// whole cut) is not counted.
+fn report_standing(name: &str, bvh: &Bvh, omega: f32, steps: usize) {
+    let mut standing = StandingQuery::new(StandingOptions {
+        min_solid_angle: omega,
+        max_results: MAX_RESULTS,
+        hysteresis: 0.1,
+    });
+    let mut deltas = Vec::new();
+    let mut position = Vec3::new(WORLD / 2.0, WORLD / 2.0, 1.7);
+    let mut heading = 0.0f32;
+    standing.update(bvh, position, &mut deltas);
+    let mut times = Vec::with_capacity(steps);
+    let mut changes = Vec::with_capacity(steps);
+    let mut visited = Vec::with_capacity(steps);
+    let mut fallbacks = 0usize;
+    let mut rng = Rng(0x57A9D);
+    for _ in 0..steps {
+        heading += rng.range(-0.05, 0.05);
+        position += Vec3::new(heading.cos(), heading.sin(), 0.0);
+        deltas.clear();
+        let start = Instant::now();
+        let stats = standing.update(bvh, position, &mut deltas);
+        times.push(start.elapsed().as_secs_f64() * 1e3);
+        changes.push(deltas.len() as f64);
+        visited.push(stats.nodes_visited as f64);
+        fallbacks += usize::from(stats.fell_back);
+    }
+    let (t50, t99) = (percentile(&mut times, 0.5), percentile(&mut times, 0.99));
+    println!(
+        "standing ({name}, omega_min {omega:e}, h 0.1, max_results {MAX_RESULTS}, {steps} steps \
+         of 1 m): update median {t50:.4} ms, p99 {t99:.4} ms; cut size {}; deltas/step median \
+         {:.0}, max {:.0}; nodes visited median {:.0}; budget fallbacks {fallbacks}",
+        standing.len(),
+        percentile(&mut changes, 0.5),
+        percentile(&mut changes, 1.0),
+        percentile(&mut visited, 0.5),
     );
 }
 

@@ -181,7 +181,7 @@ impl Bvh {
         }
     }
 
-    fn aggregate(&self, n: u32, node: &Node, solid_angle: f32) -> CutEntry {
+    pub(crate) fn aggregate(&self, n: u32, node: &Node, solid_angle: f32) -> CutEntry {
         CutEntry {
             item: CutItem::Aggregate(NodeId(n)),
             parent: (node.parent != NONE).then_some(NodeId(node.parent)),
@@ -192,7 +192,7 @@ impl Bvh {
         }
     }
 
-    fn object_entry(&self, viewer: Vec3, o: u32, leaf: u32) -> CutEntry {
+    pub(crate) fn object_entry(&self, viewer: Vec3, o: u32, leaf: u32) -> CutEntry {
         let sphere = self.objects.sphere[o as usize];
         CutEntry {
             item: CutItem::Object(ObjectId(o)),

@@ -18,6 +18,10 @@
 //! - `bulk.rs`: [`Bvh::bulk_build`] and [`Bvh::rebuild`], the top-down build by descriptor
 //!   dispersion (section 4.3), parallel with rayon.
 //! - `cut.rs`: [`Bvh::cut`], best-first refinement by worst-case solid angle.
+//! - `standing.rs`: [`StandingQuery`], a per-client cut kept up to date with ordered
+//!   [`CutDelta`]s and hysteresis (Sirikata's `RTreeCutQueryHandler`).
+//! - [`spatial`]: [`SpatialBaseline`], the same objects in an `obvhs` SAH BVH with the same
+//!   cut, the query-cost baseline.
 //! - `validate.rs`: [`Bvh::validate`], every structural invariant.
 //! - [`solid_angle`]: eq. 3 and the max-sphere worst case.
 //! - [`bounds`]: spheres, boxes and the sphere fit.
@@ -31,7 +35,9 @@ mod insert;
 pub mod options;
 mod remove;
 pub mod solid_angle;
+pub mod spatial;
 mod split;
+mod standing;
 mod tree;
 mod validate;
 
@@ -40,6 +46,8 @@ pub use cut::{Cut, CutEntry, CutItem, CutQuery, CutWorkspace, EntryKind};
 pub use error::{BvhError, InvalidTree};
 pub use options::BvhOptions;
 pub use solid_angle::{solid_angle, worst_case_solid_angle};
+pub use spatial::{SpatialBaseline, SpatialCut, SpatialEntry, SpatialItem, SpatialWorkspace};
+pub use standing::{apply_deltas, CutDelta, StandingOptions, StandingQuery, UpdateStats};
 pub use tree::{Bvh, NewObject, NodeId, NodeRef, ObjectId, ObjectRef};
 
 /// Length of a shape descriptor: the 121 rotation-invariant norms of a 3D Zernike descriptor

@@ -3,14 +3,16 @@
 //!
 //! 1. **Models**: base models plus perturbed variants of each ([`perturb`]).
 //! 2. **Descriptors** of every model ([`crate::describe`]).
-//! 3. **Renders** of every model along its three canonical axes, from both sides, at 443 x 443
-//!    pixels and every halving down to 6 x 6 ([`render`]), one image per Table 1 row
-//!    (443^2 < 196,608 pixels, ..., 6^2 < 48).
-//! 4. **Pairs**: the second model is aligned to the first as deduplication would align it: PCA
-//!    axes, and the best of the eight sign flips (chosen at 27 x 27 pixels; a flip is a change
-//!    of side or a mirrored image, so no re-rendering). The pair is then compared at each size
-//!    by SSIM ([`ssim`]), worst of the three orthogonal views; it is indistinguishable at a
-//!    size when that worst score reaches the threshold. Sizes run smallest first and stop at the first distinguishable one: a pair
+//! 3. **Renders** of every model along its three axes, from both sides, at 443 x 443 pixels
+//!    and every halving down to 6 x 6 ([`render`]), one image per Table 1 row (443^2 < 196,608
+//!    pixels, ..., 6^2 < 48). Like the paper's uploaded models, each is drawn in its own frame
+//!    (its base model's centroid and bounding sphere, its own axes), so a variant differs from
+//!    its base only by its perturbation, not by a re-estimated pose.
+//! 4. **Pairs**: the second model takes the best of the eight axis sign flips (chosen at
+//!    27 x 27 pixels; a flip is a change of side or a mirrored image, so no re-rendering), as
+//!    deduplication tries them. The pair is then compared at each size by SSIM ([`ssim`]),
+//!    worst of the three orthogonal views; it is indistinguishable at a size when that worst
+//!    score reaches the threshold. Sizes run smallest first and stop at the first distinguishable one: a pair
 //!    told apart at 27 x 27 pixels is told apart at 55 x 55.
 //! 5. **Derivation** ([`derive_row`]): for each size, the thresholds (z*, t*) that admit the
 //!    most indistinguishable pairs while admitting no distinguishable pair: every pair with
@@ -28,7 +30,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::{describe, t_diff, z_diff, DescriptorError, DescriptorOptions, Descriptors};
 use perturb::Perturbation;
-use render::{render_pyramid, Image, Scene};
+use render::{render_pyramid, CanonicalFrame, Image, Scene};
 
 /// Upper bounds (exclusive) of Table 1's image sizes in pixels, smallest first.
 pub const PIXEL_BUCKETS: [u32; 7] = [48, 192, 768, 3072, 12_288, 49_152, 196_608];
@@ -213,7 +215,7 @@ impl Default for CalibrationOptions {
 }
 
 /// One compared pair.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct PairObservation {
     /// First model.
     pub a: usize,
@@ -250,10 +252,10 @@ pub fn run(
     bases: Vec<CalibrationModel>,
     options: &CalibrationOptions,
     progress: Progress<'_>,
-) -> Result<(CalibrationTable, Vec<PairObservation>), DescriptorError> {
-    let models = with_variants(bases, &options.perturbations);
+) -> Result<Calibration, DescriptorError> {
+    let (models, anchors) = with_variants(bases, &options.perturbations);
     let descriptors = describe_all(&models, options, progress)?;
-    let renders = render_all(&models, options, progress)?;
+    let renders = render_all(&models, &anchors, options, progress)?;
     let lowest = options
         .sensitivity
         .iter()
@@ -295,8 +297,8 @@ pub fn run(
         .iter()
         .map(|&t| (t, derive(t).0))
         .collect();
-    Ok((
-        CalibrationTable {
+    Ok(Calibration {
+        table: CalibrationTable {
             table,
             ssim_threshold: options.ssim_threshold,
             models: models.len(),
@@ -305,27 +307,43 @@ pub fn run(
             sensitivity,
             command: "horizon calibrate --out descriptors/data".into(),
         },
+        names: models.iter().map(|m| m.name.clone()).collect(),
         pairs,
-    ))
+    })
 }
 
-/// Bases followed by each base's variants.
+/// What [`run`] returns.
+#[derive(Clone, Debug)]
+pub struct Calibration {
+    /// The derived table, as checked in.
+    pub table: CalibrationTable,
+    /// Every model's name, variants included, by index.
+    pub names: Vec<String>,
+    /// Every compared pair (indices into `names`).
+    pub pairs: Vec<PairObservation>,
+}
+
+/// Each base's variants followed by the base, and for every model the index of its base.
 pub fn with_variants(
     bases: Vec<CalibrationModel>,
     perturbations: &[Perturbation],
-) -> Vec<CalibrationModel> {
+) -> (Vec<CalibrationModel>, Vec<usize>) {
     let mut out = Vec::new();
+    let mut anchors = Vec::new();
     for (k, base) in bases.into_iter().enumerate() {
+        let anchor = out.len() + perturbations.len();
         for p in perturbations {
             out.push(CalibrationModel {
                 name: format!("{}~{}", base.name, p.label()),
                 family: base.family.clone(),
                 mesh: p.apply(&base.mesh, k as u64 + 1),
             });
+            anchors.push(anchor);
         }
         out.push(base);
+        anchors.push(anchor);
     }
-    out
+    (out, anchors)
 }
 
 fn describe_all(
@@ -348,14 +366,17 @@ fn describe_all(
 /// For each model, for each of the six views, its images smallest first.
 fn render_all(
     models: &[CalibrationModel],
+    anchors: &[usize],
     options: &CalibrationOptions,
     progress: Progress<'_>,
 ) -> Result<Vec<Vec<Vec<Image>>>, DescriptorError> {
     let done = std::sync::atomic::AtomicUsize::new(0);
     models
         .par_iter()
-        .map(|m| {
-            let scene = Scene::new(&m.mesh)?;
+        .zip(anchors)
+        .map(|(m, &anchor)| {
+            let frame = CanonicalFrame::unrotated(&models[anchor].mesh)?;
+            let scene = Scene::with_frame(&m.mesh, &frame)?;
             let mut views = render_pyramid(&scene, options.base_size, 6);
             for v in &mut views {
                 v.reverse();

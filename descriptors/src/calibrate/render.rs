@@ -2,9 +2,10 @@
 //! render each model as images from three mutually orthogonal directions and also store smaller
 //! versions of these images that are downsampled by powers of two").
 //!
-//! Each model is first put in its canonical frame, the frame deduplication aligns models in:
-//! area-weighted centroid at the origin, principal axes (PCA of the surface) along x, y, z,
-//! bounding sphere of radius 1. The views are orthographic along the axes, with the unit disk
+//! Each model is first put in a frame: area-weighted centroid at the origin and bounding sphere
+//! of radius 1, with either its own axes ([`CanonicalFrame::unrotated`], what the calibration
+//! uses: a model and its variants share their base's frame) or its principal axes
+//! ([`CanonicalFrame::of`], the frame deduplication aligns distinct models in). The views are orthographic along the axes, with the unit disk
 //! filling the image, a z-buffer, base colour x texture x vertex colour, and a two-sided
 //! headlight so shape shows in the image, not only silhouette.
 
@@ -82,7 +83,18 @@ pub const BACKGROUND: Vec3 = Vec3::splat(0.5);
 impl Scene {
     /// Expands `mesh` into its canonical frame (see the module comment).
     pub fn new(mesh: &InstancedMesh) -> Result<Self, DescriptorError> {
-        let frame = CanonicalFrame::of(mesh)?;
+        Self::with_frame(mesh, &CanonicalFrame::of(mesh)?)
+    }
+
+    /// Expands `mesh` into a given frame (for example its base model's, so a variant and its
+    /// base share one pose).
+    pub fn with_frame(
+        mesh: &InstancedMesh,
+        frame: &CanonicalFrame,
+    ) -> Result<Self, DescriptorError> {
+        if mesh.expanded_triangle_count() == 0 {
+            return Err(DescriptorError::Empty);
+        }
         let textures = mesh
             .textures
             .iter()
@@ -345,6 +357,14 @@ impl CanonicalFrame {
             centroid: c,
             axes,
             scale: 1.0 / radius,
+        })
+    }
+
+    /// The frame without the rotation: centroid and unit bounding sphere, the model's own axes.
+    pub fn unrotated(mesh: &InstancedMesh) -> Result<Self, DescriptorError> {
+        Ok(Self {
+            axes: Mat3::IDENTITY,
+            ..Self::of(mesh)?
         })
     }
 
