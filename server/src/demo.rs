@@ -2,7 +2,9 @@
 //! does with no input of its own. For now it
 //! 1. imports the embedded models, prints their statistics and writes each as plain and as
 //!    compressed GLB;
-//! 2. generates the Table 2 benchmark models and simplifies each to 20% of its expanded
+//! 2. computes the shape and texture descriptors of those models and of two seeds of a
+//!    generated one, and prints every pair's differences against the calibrated Table 1;
+//! 3. generates the Table 2 benchmark models and simplifies each to 20% of its expanded
 //!    triangles with instance-aware simplification (IAS) and with the quadric baseline on the
 //!    expanded mesh, printing time, output size and error side by side.
 
@@ -57,10 +59,63 @@ pub fn run(out: &Path) -> anyhow::Result<()> {
         );
     }
     println!("wrote plain and compressed GLB files to {}", out.display());
+    descriptors()?;
     simplification(out)
 }
 
-/// Stage 2: IAS against the quadric baseline on the generated Table 2 models.
+/// Stage 2: descriptors of the embedded and generated models, and which pairs the calibrated
+/// Table 1 would deduplicate at the smallest on-screen size.
+fn descriptors() -> anyhow::Result<()> {
+    use horizon_descriptors::calibrate::Table1;
+    use horizon_descriptors::{describe, t_diff, z_diff, DescriptorOptions};
+    println!();
+    println!("descriptors (3D Zernike 121 + Color Structure 32), one core");
+    let mut models = Vec::new();
+    for (name, bytes) in MODELS {
+        let mesh = import_bytes(bytes, Format::Glb, None, &ImportOptions::default())?.mesh;
+        models.push(((*name).to_string(), mesh));
+    }
+    for seed in [1, 2] {
+        models.push((
+            format!("patio-chair#{seed}"),
+            horizon_worldgen::generate_model("patio-chair", seed)?,
+        ));
+    }
+    let mut described = Vec::new();
+    for (name, mesh) in &models {
+        let r = describe(mesh, &DescriptorOptions::default())?;
+        println!(
+            "{:<20} {:>8} voxels {:>7.1} ms",
+            name,
+            r.voxels,
+            r.seconds * 1e3
+        );
+        described.push((name, r.descriptors));
+    }
+    let table = Table1::calibrated();
+    let smallest = table.rows.first().map_or(0.0, |r| r.max_solid_angle * 0.5);
+    println!("pair                                      z_diff   t_diff  dedup when tiny");
+    for i in 0..described.len() {
+        for j in i + 1..described.len() {
+            let (a, b) = (&described[i], &described[j]);
+            let (z, t) = (z_diff(&a.1, &b.1), t_diff(&a.1, &b.1));
+            println!(
+                "{:<40} {:>8.4} {:>8.1}  {}",
+                format!("{} / {}", a.0, b.0),
+                z,
+                t,
+                if table.allows(smallest, z, t) {
+                    "yes"
+                } else {
+                    "no"
+                }
+            );
+        }
+    }
+    Ok(())
+}
+
+/// Stage 3: IAS against the quadric baseline on the generated Table 2 models.
 fn simplification(out: &Path) -> anyhow::Result<()> {
     use horizon_simplify::{simplify, simplify_qem, SimplifyOptions, Target};
     println!();

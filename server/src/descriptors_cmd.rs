@@ -87,7 +87,13 @@ const SHARED_MODELS: &[&str] = &[
 ];
 
 /// Derives Table 1 and writes `table1.json` and `table1.md` into `out`.
-pub fn calibrate(assets: &Path, out: &Path, ssim: f64, seeds: u64) -> anyhow::Result<()> {
+pub fn calibrate(
+    assets: &Path,
+    out: &Path,
+    ssim: f64,
+    seeds: u64,
+    pairs_out: Option<&Path>,
+) -> anyhow::Result<()> {
     anyhow::ensure!(
         ssim.is_finite() && ssim > 0.0 && ssim <= 1.0,
         "--ssim {ssim} is not a score in (0, 1]"
@@ -96,6 +102,13 @@ pub fn calibrate(assets: &Path, out: &Path, ssim: f64, seeds: u64) -> anyhow::Re
         (1..=16).contains(&seeds),
         "--seeds {seeds} is not between 1 and 16"
     );
+    // Fail before the long run, not after it.
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    if let Some(parent) = pairs_out.and_then(Path::parent) {
+        if !parent.as_os_str().is_empty() && !parent.is_dir() {
+            anyhow::bail!("--pairs: folder {} does not exist", parent.display());
+        }
+    }
     let started = Instant::now();
     let mut bases = Vec::new();
     for rel in SHARED_MODELS {
@@ -134,12 +147,27 @@ pub fn calibrate(assets: &Path, out: &Path, ssim: f64, seeds: u64) -> anyhow::Re
             eprintln!("{stage}: {total} done");
         }
     };
-    let (mut table, pairs) = calibrate::run(bases, &options, &progress)?;
+    let calibration = calibrate::run(bases, &options, &progress)?;
+    let (mut table, pairs) = (calibration.table, calibration.pairs);
+    if let Some(path) = pairs_out {
+        let rows: Vec<_> = pairs
+            .iter()
+            .map(|p| {
+                (
+                    &calibration.names[p.a],
+                    &calibration.names[p.b],
+                    p.z_diff,
+                    p.t_diff,
+                    &p.ssim,
+                )
+            })
+            .collect();
+        write_atomically(path, serde_json::to_string(&rows)?.as_bytes())?;
+    }
     table.command = format!(
         "horizon calibrate --out {} --ssim {ssim} --seeds {seeds}",
         out.display()
     );
-    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let json = serde_json::to_string_pretty(&table)?;
     write_atomically(&out.join("table1.json"), json.as_bytes())?;
     let markdown = markdown(&table, pairs.len(), started.elapsed().as_secs_f64());

@@ -7,6 +7,8 @@
 //! - `gen_cmd.rs`: `horizon gen model`.
 //! - `descriptors_cmd.rs`: `horizon descriptors` and `horizon calibrate`.
 //! - `simplify_cmd.rs`: `horizon simplify`.
+//! - `world_cmd.rs`: `horizon gen world`, `build`, `cut` and `sweep`; `world_store.rs`: the world
+//!   directory they read and write.
 //! - `demo.rs`: `horizon demo`, the main job on an embedded default model set.
 
 mod demo;
@@ -14,6 +16,8 @@ mod descriptors_cmd;
 mod gen_cmd;
 mod mesh_cmd;
 mod simplify_cmd;
+mod world_cmd;
+mod world_store;
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -81,10 +85,71 @@ enum Command {
         /// Seeds per worldgen model (each seed is a similar but distinct model).
         #[arg(long, default_value_t = 2)]
         seeds: u64,
+        /// Also write every compared pair (names, z_diff, t_diff, SSIM per size) as JSON.
+        #[arg(long)]
+        pairs: Option<PathBuf>,
     },
     /// Seeded procedural workloads.
     #[command(subcommand)]
     Gen(GenCommand),
+    /// Builds the BVH of a world directory (descriptors cached in descriptors.json) and
+    /// writes its snapshot bvh.json.
+    Build {
+        /// The world directory (from `horizon gen world`).
+        dir: PathBuf,
+        /// Eq. 1's mu: similarity against volume, in [0, 1].
+        #[arg(long, default_value_t = 0.8)]
+        mu: f32,
+        /// Eq. 1's w: texture against shape, in [0, 1].
+        #[arg(long, default_value_t = 0.2)]
+        omega: f32,
+        /// Print the summary as JSON.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Cuts a built world for a viewer: every object subtending at least the minimum solid
+    /// angle as itself, the rest through exactly one aggregate.
+    Cut {
+        /// The built world directory.
+        dir: PathBuf,
+        /// Viewer position X,Y,Z.
+        #[arg(long, allow_hyphen_values = true)]
+        pos: String,
+        /// Smallest solid angle (steradians) shown as itself.
+        #[arg(long)]
+        min_solid_angle: f32,
+        /// Most entries in the cut.
+        #[arg(long, default_value_t = 4000)]
+        max_results: usize,
+        /// Print JSON instead of text.
+        #[arg(long)]
+        json: bool,
+        /// List the object ids each entry covers.
+        #[arg(long)]
+        explain: bool,
+    },
+    /// Figure 5: average cut cost (nodes visited, cut size) over seeded viewpoints for trees
+    /// built with mu in {0, 0.2, ..., 1} and w in {0, 0.2, 0.5, 1}, on built worlds.
+    Sweep {
+        /// Built world directories.
+        #[arg(required = true)]
+        dirs: Vec<PathBuf>,
+        /// Viewpoints per tree.
+        #[arg(long, default_value_t = 50)]
+        views: usize,
+        /// Seed of the viewpoints.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Smallest solid angle (steradians) shown as itself.
+        #[arg(long, default_value_t = 0.001)]
+        min_solid_angle: f32,
+        /// Most entries per cut.
+        #[arg(long, default_value_t = 4000)]
+        max_results: usize,
+        /// Print JSON instead of a markdown table.
+        #[arg(long)]
+        json: bool,
+    },
     /// Runs the main job on the embedded default models and writes the results to a folder.
     Demo {
         /// Where to write the demo's output.
@@ -95,6 +160,20 @@ enum Command {
 
 #[derive(Debug, Subcommand)]
 enum GenCommand {
+    /// Writes a benchmark world (village, island, city or city9) as a world directory.
+    World {
+        /// The world's name.
+        name: String,
+        /// The directory to write (created if missing).
+        dir: PathBuf,
+        /// Seed of the generator: the same seed gives the same world.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Folder of user models for city and city9 (default: the repository's
+        /// assets/models).
+        #[arg(long)]
+        assets: Option<PathBuf>,
+    },
     /// Writes one of the benchmark models shaped like the IAS paper's Table 2:
     /// maple-tree, village-mesh, patio-chair or stonehenge.
     Model {
@@ -188,7 +267,36 @@ fn main() -> ExitCode {
             assets,
             ssim,
             seeds,
-        } => descriptors_cmd::calibrate(&assets, &out, ssim, seeds),
+            pairs,
+        } => descriptors_cmd::calibrate(&assets, &out, ssim, seeds, pairs.as_deref()),
+        Command::Gen(GenCommand::World {
+            name,
+            dir,
+            seed,
+            assets,
+        }) => world_cmd::gen_world(&name, &dir, seed, assets.as_deref()),
+        Command::Build {
+            dir,
+            mu,
+            omega,
+            json,
+        } => world_cmd::build(&dir, mu, omega, json),
+        Command::Cut {
+            dir,
+            pos,
+            min_solid_angle,
+            max_results,
+            json,
+            explain,
+        } => world_cmd::cut(&dir, &pos, min_solid_angle, max_results, json, explain),
+        Command::Sweep {
+            dirs,
+            views,
+            seed,
+            min_solid_angle,
+            max_results,
+            json,
+        } => world_cmd::sweep(&dirs, views, seed, min_solid_angle, max_results, json),
         Command::Demo { out } => demo::run(&out),
     };
     match result {

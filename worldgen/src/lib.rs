@@ -19,6 +19,8 @@
 //!   blade, height field), built once per submesh.
 //! - [`textures`]: small procedural PNG textures (bark, leaf, stone, wood, roof tiles, ...).
 //! - [`assembly`]: collects textures, materials, submeshes and instances into a model.
+//! - [`worlds`]: the benchmark worlds (village, island, city, city9) built from small parametric
+//!   models; [`generate_world`].
 //! - [`noise`] and [`rng`]: the seeded value noise and SplitMix64 generator everything draws from.
 
 pub mod assembly;
@@ -27,6 +29,9 @@ pub mod noise;
 pub mod rng;
 pub mod shapes;
 pub mod textures;
+pub mod worlds;
+
+pub use worlds::{generate_world, generate_world_with, World, WorldObject, WORLD_NAMES};
 
 use horizon_mesh::InstancedMesh;
 
@@ -84,6 +89,14 @@ pub enum WorldgenError {
     /// The name is not one of [`MODEL_NAMES`].
     #[error("unknown model {name:?}; valid names are: {}", valid.join(", "))]
     UnknownModel {
+        /// The name asked for.
+        name: String,
+        /// The names that exist.
+        valid: &'static [&'static str],
+    },
+    /// The name is not one of [`WORLD_NAMES`].
+    #[error("unknown world {name:?}; valid names are: {}", valid.join(", "))]
+    UnknownWorld {
         /// The name asked for.
         name: String,
         /// The names that exist.
