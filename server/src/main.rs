@@ -9,8 +9,10 @@
 //! - `simplify_cmd.rs`: `horizon simplify`.
 //! - `world_cmd.rs`: `horizon gen world`, `build`, `cut` and `sweep`; `world_store.rs`: the world
 //!   directory they read and write.
+//! - `bench_cmd.rs`: `horizon bench-bvh`, issue 5's targets measured on a built world.
 //! - `demo.rs`: `horizon demo`, the main job on an embedded default model set.
 
+mod bench_cmd;
 mod demo;
 mod descriptors_cmd;
 mod gen_cmd;
@@ -147,6 +149,34 @@ enum Command {
         #[arg(long, default_value_t = 4000)]
         max_results: usize,
         /// Print JSON instead of a markdown table.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Measures issue 5's BVH targets on a built world (bulk rebuild, incremental insertion,
+    /// cut queries beside the obvhs baseline, standing-query updates, memory) and writes a
+    /// markdown report with PASS/FAIL per target.
+    BenchBvh {
+        /// The built world directory (`horizon build` wrote its descriptors.json).
+        dir: PathBuf,
+        /// Seeded viewpoints for the cut queries.
+        #[arg(long, default_value_t = 200)]
+        views: usize,
+        /// Seed of the viewpoints and of the walk.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Steps of 1 m of the standing-query walk.
+        #[arg(long, default_value_t = 2000)]
+        steps: usize,
+        /// Smallest solid angle (steradians) shown as itself.
+        #[arg(long, default_value_t = 0.001)]
+        min_solid_angle: f32,
+        /// Most entries per cut.
+        #[arg(long, default_value_t = 4000)]
+        max_results: usize,
+        /// The markdown report (default: bench/results/bvh_<world name>.md).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Print the report as JSON on stdout (the markdown file is still written).
         #[arg(long)]
         json: bool,
     },
@@ -297,6 +327,25 @@ fn main() -> ExitCode {
             max_results,
             json,
         } => world_cmd::sweep(&dirs, views, seed, min_solid_angle, max_results, json),
+        Command::BenchBvh {
+            dir,
+            views,
+            seed,
+            steps,
+            min_solid_angle,
+            max_results,
+            out,
+            json,
+        } => bench_cmd::run(&bench_cmd::BenchArgs {
+            dir,
+            views,
+            seed,
+            steps,
+            min_solid_angle,
+            max_results,
+            out,
+            json,
+        }),
         Command::Demo { out } => demo::run(&out),
     };
     match result {

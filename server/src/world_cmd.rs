@@ -286,7 +286,7 @@ pub fn build(dir: &Path, mu: f32, w: f32, json: bool) -> anyhow::Result<()> {
 
 /// The BVH's input objects: each object's world bounding sphere (the model's sphere through
 /// its transform) and its model's descriptors. Every model must be in `cache`.
-fn new_objects<'a>(
+pub(crate) fn new_objects<'a>(
     manifest: &WorldManifest,
     objects: &ObjectList,
     cache: &'a DescriptorCache,
