@@ -9,7 +9,9 @@ use std::time::Instant;
 
 use anyhow::Context;
 use glam::{Affine3A, Vec3};
-use horizon_bvh::{Bvh, BvhOptions, CutItem, CutQuery, EntryKind, NewObject, ObjectId, Sphere};
+use horizon_bvh::{
+    Bvh, BvhOptions, CutItem, CutQuery, EntryKind, NewObject, ObjectId, SpatialBaseline, Sphere,
+};
 use horizon_descriptors::{describe, DescriptorOptions};
 use horizon_mesh::{export_glb, import_file, ExportOptions, ImportOptions, InstancedMesh};
 use rayon::prelude::*;
@@ -329,8 +331,10 @@ pub(crate) fn new_objects<'a>(
 #[derive(Debug, Serialize)]
 struct SweepRow {
     world: String,
-    mu: f32,
-    w: f32,
+    /// "similarity" (ours, bulk-built with mu and w) or "obvhs" (the spatial SAH baseline).
+    tree: &'static str,
+    mu: Option<f32>,
+    w: Option<f32>,
     nodes: usize,
     height: u32,
     build_seconds: f64,
@@ -368,6 +372,31 @@ pub fn sweep(
         let cache: DescriptorCache = WorldDir::read_json(&store.descriptors())
             .with_context(|| format!("{} is not built (run horizon build)", dir.display()))?;
         let input = new_objects(&manifest, &objects, &cache)?;
+        // Mean nodes visited, cut size and seconds over the same seeded viewpoints.
+        let measure = |bounds: &horizon_bvh::Aabb, cut: &dyn Fn(&CutQuery) -> (usize, usize)| {
+            let mut rng = horizon_worldgen::rng::Rng::new(seed);
+            let (mut visited, mut size, mut seconds) = (0usize, 0usize, 0.0f64);
+            for _ in 0..views {
+                let position = Vec3::new(
+                    bounds.min.x + rng.unit() * (bounds.max.x - bounds.min.x),
+                    2.0,
+                    bounds.min.z + rng.unit() * (bounds.max.z - bounds.min.z),
+                );
+                let query = CutQuery {
+                    position,
+                    min_solid_angle,
+                    max_results,
+                };
+                let t = Instant::now();
+                let (v, n) = cut(&query);
+                seconds += t.elapsed().as_secs_f64();
+                visited += v;
+                size += n;
+            }
+            let n = views as f64;
+            (visited as f64 / n, size as f64 / n, seconds / n)
+        };
+        let mut last = None;
         for mu in SWEEP_MU {
             for w in SWEEP_W {
                 let started = Instant::now();
@@ -377,54 +406,63 @@ pub fn sweep(
                     anyhow::bail!("{} has no objects", dir.display());
                 };
                 let bounds = root.aabb();
-                // The same viewpoints for every (mu, w).
-                let mut rng = horizon_worldgen::rng::Rng::new(seed);
-                let (mut visited, mut size, mut seconds) = (0usize, 0usize, 0.0f64);
-                for _ in 0..views {
-                    let position = Vec3::new(
-                        bounds.min.x + rng.unit() * (bounds.max.x - bounds.min.x),
-                        2.0,
-                        bounds.min.z + rng.unit() * (bounds.max.z - bounds.min.z),
-                    );
-                    let query = CutQuery {
-                        position,
-                        min_solid_angle,
-                        max_results,
-                    };
-                    let t = Instant::now();
-                    let cut = bvh.cut(&query);
-                    seconds += t.elapsed().as_secs_f64();
-                    visited += cut.nodes_visited;
-                    size += cut.entries.len();
-                }
-                let n = views as f64;
+                let (visited, size, seconds) = measure(&bounds, &|q| {
+                    let cut = bvh.cut(q);
+                    (cut.nodes_visited, cut.entries.len())
+                });
                 rows.push(SweepRow {
                     world: manifest.name.clone(),
-                    mu,
-                    w,
+                    tree: "similarity",
+                    mu: Some(mu),
+                    w: Some(w),
                     nodes: bvh.node_count(),
                     height: bvh.height(),
                     build_seconds,
-                    mean_nodes_visited: visited as f64 / n,
-                    mean_cut_size: size as f64 / n,
-                    mean_query_seconds: seconds / n,
+                    mean_nodes_visited: visited,
+                    mean_cut_size: size,
+                    mean_query_seconds: seconds,
                 });
+                last = Some((bvh, bounds));
             }
+        }
+        // The spatial baseline over the same objects and viewpoints.
+        if let Some((bvh, bounds)) = last {
+            let started = Instant::now();
+            let baseline = SpatialBaseline::build(&bvh);
+            let build_seconds = started.elapsed().as_secs_f64();
+            let (visited, size, seconds) = measure(&bounds, &|q| {
+                let cut = baseline.cut(q);
+                (cut.nodes_visited, cut.entries.len())
+            });
+            rows.push(SweepRow {
+                world: manifest.name.clone(),
+                tree: "obvhs",
+                mu: None,
+                w: None,
+                nodes: baseline.node_count(),
+                height: 0,
+                build_seconds,
+                mean_nodes_visited: visited,
+                mean_cut_size: size,
+                mean_query_seconds: seconds,
+            });
         }
     }
     if json {
         println!("{}", serde_json::to_string(&rows)?);
     } else {
         println!(
-            "| world | mu | w | nodes | height | build s | nodes visited | cut size | query ms |"
+            "| world | tree | mu | w | nodes | height | build s | nodes visited | cut size | query ms |"
         );
-        println!("|---|---|---|---|---|---|---|---|---|");
+        println!("|---|---|---|---|---|---|---|---|---|---|");
+        let show = |v: Option<f32>| v.map_or("-".to_string(), |v| v.to_string());
         for r in &rows {
             println!(
-                "| {} | {} | {} | {} | {} | {:.2} | {:.1} | {:.1} | {:.3} |",
+                "| {} | {} | {} | {} | {} | {} | {:.2} | {:.1} | {:.1} | {:.3} |",
                 r.world,
-                r.mu,
-                r.w,
+                r.tree,
+                show(r.mu),
+                show(r.w),
                 r.nodes,
                 r.height,
                 r.build_seconds,
