@@ -77,7 +77,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     // triangles (the shared models are all smaller).
     for name in ["village-mesh", "maple-tree"] {
         let full = horizon_worldgen::generate_model(name, 1)?;
-        let small = simplify(&full, Target::Triangles(20_000), &SimplifyOptions::default())?.mesh;
+        let small = simplify(
+            &full,
+            Target::Triangles(20_000),
+            &SimplifyOptions::default(),
+        )?
+        .mesh;
         models.push((format!("{name}-20k"), small));
     }
     for name in ["patio-chair", "stonehenge"] {

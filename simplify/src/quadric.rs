@@ -82,6 +82,13 @@ impl Quadric {
         self.weight
     }
 
+    /// A value read from both ends of the quadric's storage, to pull it into the cache ahead
+    /// of use.
+    #[inline]
+    pub(crate) fn touch(&self) -> f64 {
+        self.m[0] + self.weight
+    }
+
     /// `x^T Q x` (eq. 5), clamped at zero against rounding.
     pub fn eval(&self, x: DVec3) -> f64 {
         let m = &self.m;

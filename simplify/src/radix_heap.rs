@@ -46,6 +46,7 @@ impl<T: Copy> RadixHeap<T> {
     }
 
     /// Removes an item with the smallest key.
+    #[cfg(test)]
     pub(crate) fn pop(&mut self) -> Option<(u64, T)> {
         if self.len == 0 {
             return None;
@@ -65,6 +66,45 @@ impl<T: Copy> RadixHeap<T> {
         }
         self.len -= 1;
         self.buckets[0].pop()
+    }
+
+    /// Removes an item with the smallest key among those `valid` accepts, dropping every
+    /// rejected item it meets. `valid` must reject an item for good once it rejects it (as a
+    /// stale entry stays stale): then the order among the valid items is that of [`Self::pop`].
+    /// Rejected items are also dropped in bulk whenever a bucket is redistributed, where the
+    /// checks of a whole bucket run back to back (their memory accesses overlap) instead of
+    /// one per pop.
+    pub(crate) fn pop_valid(&mut self, mut valid: impl FnMut(&T) -> bool) -> Option<(u64, T)> {
+        loop {
+            if self.len == 0 {
+                return None;
+            }
+            if self.buckets[0].is_empty() {
+                let i = self.buckets.iter().position(|b| !b.is_empty())?;
+                let mut moved = std::mem::take(&mut self.buckets[i]);
+                let before = moved.len();
+                moved.retain(|(_, item)| valid(item));
+                self.len -= before - moved.len();
+                if let Some(min) = moved.iter().map(|&(k, _)| k).min() {
+                    self.last = min;
+                    for &(k, item) in &moved {
+                        let b = self.bucket(k);
+                        self.buckets[b].push((k, item));
+                    }
+                }
+                moved.clear();
+                self.buckets[i] = moved;
+                continue;
+            }
+            self.len -= 1;
+            let popped = self.buckets[0].pop();
+            if let Some((_, item)) = &popped {
+                if !valid(item) {
+                    continue;
+                }
+            }
+            return popped;
+        }
     }
 
     /// Number of queued items.
@@ -91,6 +131,21 @@ mod tests {
             sorted.sort_unstable();
             let popped: Vec<u64> = std::iter::from_fn(|| heap.pop().map(|(k, _)| k)).collect();
             prop_assert_eq!(popped, sorted);
+        }
+
+        #[test]
+        fn pop_valid_is_pop_without_the_rejected(keys in prop::collection::vec(0u64..1 << 40, 0..300)) {
+            let (mut all, mut some) = (RadixHeap::default(), RadixHeap::default());
+            for (i, &k) in keys.iter().enumerate() {
+                all.push(k, i);
+                some.push(k, i);
+            }
+            let expected: Vec<(u64, usize)> =
+                std::iter::from_fn(|| all.pop()).filter(|&(_, i)| i % 3 != 0).collect();
+            let got: Vec<(u64, usize)> = std::iter::from_fn(|| some.pop_valid(|&i| i % 3 != 0)).collect();
+            let keys_of = |v: &[(u64, usize)]| v.iter().map(|p| p.0).collect::<Vec<_>>();
+            prop_assert_eq!(keys_of(&got), keys_of(&expected));
+            prop_assert_eq!(some.len(), 0);
         }
 
         #[test]
