@@ -83,7 +83,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             &SimplifyOptions::default(),
         )?
         .mesh;
-        models.push((format!("{name}-20k"), small));
+        models.push((format!("{name} (IAS to 20k)"), small));
     }
     for name in ["patio-chair", "stonehenge"] {
         models.push((name.into(), horizon_worldgen::generate_model(name, 1)?));
@@ -202,7 +202,9 @@ fn markdown(r: &Report) -> String {
         s,
         "`cargo run --release -p horizon-descriptors --example descriptors_bench`. One core \
          (a one-thread rayon pool), median of {RUNS} runs; the target is 150 ms for a \
-         20k-triangle model.\n"
+         20k-triangle model. The generated models are simplified by IAS towards 20,000 \
+         expanded triangles; village-mesh stops near 84k, the floor of its closed parts \
+         times 13,523 instances.\n"
     );
     let _ = writeln!(
         s,
