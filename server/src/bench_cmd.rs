@@ -3,7 +3,7 @@
 //!
 //! The trees are rebuilt from `objects.json` and the `descriptors.json` cache (parsing the
 //! ~1 GB `bvh.json` snapshot of city9 would be slower than the bulk build itself):
-//! 1. bulk rebuild (section 4.3) on all cores, default options (mu 0.8, w 0.2);
+//! 1. bulk rebuild (section 4.3) on all cores, mu 0.8, w 0.2 and the world's descriptor scales;
 //! 2. incremental insertion of every object into an empty tree, one core;
 //! 3. cut queries (best-first, `max_results` 4000) from seeded viewpoints at eye height 2 m
 //!    inside the world's bounds, on both trees, one core;
@@ -20,8 +20,8 @@ use std::time::Instant;
 use anyhow::Context;
 use glam::Vec3;
 use horizon_bvh::{
-    Aabb, Bvh, BvhOptions, Cut, CutQuery, CutWorkspace, SpatialBaseline, SpatialCut,
-    SpatialWorkspace, StandingOptions, StandingQuery,
+    Aabb, Bvh, Cut, CutQuery, CutWorkspace, SpatialBaseline, SpatialCut, SpatialWorkspace,
+    StandingOptions, StandingQuery,
 };
 use horizon_worldgen::rng::Rng;
 use serde::Serialize;
@@ -151,6 +151,8 @@ struct BenchReport {
     validate_seconds: f64,
     mu: f32,
     w: f32,
+    shape_scale: f32,
+    texture_scale: f32,
     views: usize,
     seed: u64,
     steps: usize,
@@ -209,7 +211,7 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
         .context("cannot start a one-thread pool")?;
 
     // 1. Bulk rebuild, all cores.
-    let options = BvhOptions::default();
+    let options = crate::world_cmd::world_options(0.8, 0.2, &manifest, &cache);
     let t = Instant::now();
     let bulk = Bvh::bulk_build(options.clone(), &input)?;
     let seconds = t.elapsed().as_secs_f64();
@@ -371,6 +373,8 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
         validate_seconds,
         mu: options.mu,
         w: options.w,
+        shape_scale: options.shape_scale,
+        texture_scale: options.texture_scale,
         views: args.views,
         seed: args.seed,
         steps: args.steps,
@@ -610,7 +614,8 @@ fn markdown(r: &BenchReport) -> String {
         "`horizon bench-bvh {} --views {} --seed {} --steps {}`: {} objects, {} unique models; \
          {} rayon threads for the bulk rebuild, one core for everything else. Load average \
          before {}, after {}. Trees rebuilt from objects.json + descriptors.json (load {:.2} s); \
-         options mu {}, w {}. Queries: Omega_min {:e} sr, max_results {}, {} seeded viewpoints \
+         options mu {}, w {}, descriptor scales (the world's median z_diff and t_diff) {} and \
+         {}. Queries: Omega_min {:e} sr, max_results {}, {} seeded viewpoints \
          (seed {}) at eye height {EYE_HEIGHT} m inside the world bounds \
          ({:?} .. {:?}).\n",
         r.dir,
@@ -625,6 +630,8 @@ fn markdown(r: &BenchReport) -> String {
         r.load_seconds,
         r.mu,
         r.w,
+        r.shape_scale,
+        r.texture_scale,
         r.min_solid_angle,
         r.max_results,
         r.views,

@@ -244,7 +244,7 @@ pub fn build(dir: &Path, mu: f32, w: f32, json: bool) -> anyhow::Result<()> {
     let t2 = Instant::now();
     note("building the BVH");
     let new_objects = new_objects(&manifest, &objects, &cache)?;
-    let bvh = Bvh::bulk_build(BvhOptions::default().with_weights(mu, w), &new_objects)?;
+    let bvh = Bvh::bulk_build(world_options(mu, w, &manifest, &cache), &new_objects)?;
     bvh.validate()?;
     let bvh_seconds = t2.elapsed().as_secs_f64();
 
@@ -288,6 +288,82 @@ pub fn build(dir: &Path, mu: f32, w: f32, json: bool) -> anyhow::Result<()> {
 
 /// The BVH's input objects: each object's world bounding sphere (the model's sphere through
 /// its transform) and its model's descriptors. Every model must be in `cache`.
+/// BVH options for a world: eq. 1's mu and w, and the two descriptor distances normalised by
+/// this world's own scales, the median z_diff and the median t_diff between its distinct
+/// models (every pair up to 400 models, else a seeded sample of 40,000 pairs). One unit of
+/// either term then means "as different as two typical models of this world", which keeps
+/// shape, texture and volume on comparable footings whatever the world. Worlds with fewer than
+/// two models, or whose medians are 0, keep the defaults.
+pub(crate) fn world_options(
+    mu: f32,
+    w: f32,
+    manifest: &WorldManifest,
+    cache: &DescriptorCache,
+) -> BvhOptions {
+    let mut options = BvhOptions::default().with_weights(mu, w);
+    let models: Vec<&crate::world_store::ModelDescriptors> = manifest
+        .models
+        .iter()
+        .filter_map(|m| cache.models.get(&m.hash))
+        .collect();
+    let n = models.len();
+    if n < 2 {
+        return options;
+    }
+    let pairs: Vec<(usize, usize)> = if n <= 400 {
+        (0..n)
+            .flat_map(|a| (a + 1..n).map(move |b| (a, b)))
+            .collect()
+    } else {
+        let mut rng = horizon_worldgen::rng::Rng::new(0x5CA1E);
+        (0..40_000)
+            .map(|_| {
+                let a = ((rng.unit() * n as f32) as usize).min(n - 1);
+                let b = ((rng.unit() * (n - 1) as f32) as usize).min(n - 2);
+                (a, if b >= a { b + 1 } else { b })
+            })
+            .collect()
+    };
+    let median = |mut v: Vec<f32>| {
+        v.sort_by(f32::total_cmp);
+        v[v.len() / 2]
+    };
+    let z = median(
+        pairs
+            .iter()
+            .map(|&(a, b)| {
+                models[a]
+                    .zernike
+                    .iter()
+                    .zip(&models[b].zernike)
+                    .map(|(x, y)| (x - y) * (x - y))
+                    .sum::<f32>()
+                    .sqrt()
+            })
+            .collect(),
+    );
+    let t = median(
+        pairs
+            .iter()
+            .map(|&(a, b)| {
+                models[a]
+                    .csd
+                    .iter()
+                    .zip(&models[b].csd)
+                    .map(|(x, y)| (x - y).abs())
+                    .sum::<f32>()
+            })
+            .collect(),
+    );
+    if z.is_finite() && z > 0.0 {
+        options.shape_scale = z;
+    }
+    if t.is_finite() && t > 0.0 {
+        options.texture_scale = t;
+    }
+    options
+}
+
 pub(crate) fn new_objects<'a>(
     manifest: &WorldManifest,
     objects: &ObjectList,
@@ -400,7 +476,7 @@ pub fn sweep(
         for mu in SWEEP_MU {
             for w in SWEEP_W {
                 let started = Instant::now();
-                let bvh = Bvh::bulk_build(BvhOptions::default().with_weights(mu, w), &input)?;
+                let bvh = Bvh::bulk_build(world_options(mu, w, &manifest, &cache), &input)?;
                 let build_seconds = started.elapsed().as_secs_f64();
                 let Some(root) = bvh.node(bvh.root()) else {
                     anyhow::bail!("{} has no objects", dir.display());

@@ -98,11 +98,15 @@ fn village_gen_build_cut_covers_every_object_once() {
         len(&fine)
     );
 
-    // Figure 5's sweep: one row per (mu, w).
+    // Figure 5's sweep: one row per (mu, w), then the obvhs baseline.
     let rows: Value =
         serde_json::from_str(&ok(&["sweep", dir, "--views", "3", "--json"])).expect("json");
     let rows = rows.as_array().expect("rows");
-    assert_eq!(rows.len(), 24);
+    let trees = |name: &str| rows.iter().filter(|r| r["tree"] == name).count();
+    assert_eq!(
+        (trees("similarity"), trees("obvhs"), rows.len()),
+        (24, 1, 25)
+    );
     assert!(rows.iter().all(|r| r["mean_cut_size"].as_f64() > Some(0.0)));
 
     // Bad input: one line, exit code 1.
