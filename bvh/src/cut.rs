@@ -206,11 +206,11 @@ impl Bvh {
 }
 
 /// A node in the refinement heap, ordered by worst-case solid angle (ties by id, so the
-/// result does not depend on heap internals).
+/// result does not depend on heap internals). Shared with the spatial baseline.
 #[derive(Clone, Copy, Debug)]
-struct Candidate {
-    solid_angle: f32,
-    node: u32,
+pub(crate) struct Candidate {
+    pub(crate) solid_angle: f32,
+    pub(crate) node: u32,
 }
 
 impl PartialEq for Candidate {

@@ -14,7 +14,6 @@
 //! The `obvhs` build is `BvhBuildParams::medium_build()`: PLOC clustering, then SAH-driven
 //! reinsertion and leaf collapsing, on one thread (the crate's `parallel` feature is off).
 
-use std::cmp::Ordering;
 use std::collections::BinaryHeap;
 use std::time::Duration;
 
@@ -23,7 +22,7 @@ use obvhs::bvh2::Bvh2;
 use obvhs::BvhBuildParams;
 
 use crate::bounds::{fit_sphere, Sphere};
-use crate::cut::CutQuery;
+use crate::cut::{Candidate, CutQuery};
 use crate::solid_angle::{solid_angle, worst_case_solid_angle};
 use crate::tree::{Bvh, ObjectId};
 
@@ -285,33 +284,4 @@ fn to_obvhs(s: Sphere) -> ObAabb {
     (b.min.x, b.min.y, b.min.z) = (lo.x, lo.y, lo.z);
     (b.max.x, b.max.y, b.max.z) = (hi.x, hi.y, hi.z);
     b
-}
-
-/// A node in the refinement heap (ties by index, as in `cut.rs`).
-#[derive(Clone, Copy, Debug)]
-struct Candidate {
-    solid_angle: f32,
-    node: u32,
-}
-
-impl PartialEq for Candidate {
-    fn eq(&self, other: &Self) -> bool {
-        self.cmp(other) == Ordering::Equal
-    }
-}
-
-impl Eq for Candidate {}
-
-impl PartialOrd for Candidate {
-    fn partial_cmp(&self, other: &Self) -> Option<Ordering> {
-        Some(self.cmp(other))
-    }
-}
-
-impl Ord for Candidate {
-    fn cmp(&self, other: &Self) -> Ordering {
-        self.solid_angle
-            .total_cmp(&other.solid_angle)
-            .then_with(|| other.node.cmp(&self.node))
-    }
 }
