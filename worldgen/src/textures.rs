@@ -156,7 +156,7 @@ pub fn cobbles(seed: u64) -> Result<Texture, WorldgenError> {
 }
 
 /// A square image of `size` pixels, each the sRGB colour `f(u, v)` at its centre.
-fn paint(size: u32, f: impl Fn(f32, f32) -> Vec3) -> RgbImage {
+pub(crate) fn paint(size: u32, f: impl Fn(f32, f32) -> Vec3) -> RgbImage {
     RgbImage::from_fn(size, size, |x, y| {
         let c = f(
             (x as f32 + 0.5) / size as f32,
@@ -169,7 +169,7 @@ fn paint(size: u32, f: impl Fn(f32, f32) -> Vec3) -> RgbImage {
 }
 
 /// PNG-encodes `image` into a texture with the same wrap mode on both axes.
-fn encode(image: &RgbImage, wrap: Wrap) -> Result<Texture, WorldgenError> {
+pub(crate) fn encode(image: &RgbImage, wrap: Wrap) -> Result<Texture, WorldgenError> {
     let mut bytes = Vec::new();
     image.write_with_encoder(PngEncoder::new(&mut bytes))?;
     Ok(Texture {

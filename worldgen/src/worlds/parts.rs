@@ -7,13 +7,12 @@ use std::f32::consts::{FRAC_PI_2, FRAC_PI_4};
 
 use glam::{Affine3A, Quat, Vec2, Vec3, Vec4};
 use horizon_mesh::{InstancedMesh, Texture, Wrap};
-use image::codecs::png::PngEncoder;
-use image::{Rgb, RgbImage};
 
 use crate::assembly::{plain, textured, trs, ModelBuilder};
 use crate::noise::{cell_hash, fbm3, tileable_fbm};
 use crate::rng::Rng;
 use crate::shapes::{cone, cuboid, extrude, frustum, uv_sphere};
+use crate::textures::{encode, paint};
 use crate::WorldgenError;
 
 /// The shape of a house's roof.
@@ -343,7 +342,7 @@ pub fn facade_texture(seed: u64, wall: Vec3, window: Vec3) -> Result<Texture, Wo
             wall * (0.85 + 0.3 * n)
         }
     });
-    encode(&image)
+    encode(&image, Wrap::Repeat)
 }
 
 /// A paving texture: `cells` × `cells` slabs of `colour` (sRGB), each its own shade, in
@@ -364,7 +363,7 @@ pub fn paving_texture(seed: u64, colour: Vec3, cells: u32) -> Result<Texture, Wo
             colour * shade * (0.9 + 0.2 * n)
         }
     });
-    encode(&image)
+    encode(&image, Wrap::Repeat)
 }
 
 /// A road texture: asphalt with a dashed centre line along v. 32×32, repeating.
@@ -378,37 +377,11 @@ pub fn road_texture(seed: u64, line: Vec3) -> Result<Texture, WorldgenError> {
             asphalt
         }
     });
-    encode(&image)
+    encode(&image, Wrap::Repeat)
 }
 
 /// A linear RGBA colour from a random sRGB colour near `base` (each channel ± `spread`).
 pub fn near(rng: &mut Rng, base: Vec3, spread: f32) -> Vec3 {
     (base + Vec3::new(rng.jitter(spread), rng.jitter(spread), rng.jitter(spread)))
         .clamp(Vec3::ZERO, Vec3::ONE)
-}
-
-/// A square image of `size` pixels, each the sRGB colour `f(u, v)` at its centre.
-fn paint(size: u32, f: impl Fn(f32, f32) -> Vec3) -> RgbImage {
-    RgbImage::from_fn(size, size, |x, y| {
-        let c = f(
-            (x as f32 + 0.5) / size as f32,
-            (y as f32 + 0.5) / size as f32,
-        );
-        Rgb(c
-            .to_array()
-            .map(|k| (k.clamp(0.0, 1.0) * 255.0).round() as u8))
-    })
-}
-
-/// PNG-encodes `image` into a repeating texture.
-fn encode(image: &RgbImage) -> Result<Texture, WorldgenError> {
-    let mut bytes = Vec::new();
-    image.write_with_encoder(PngEncoder::new(&mut bytes))?;
-    Ok(Texture {
-        bytes,
-        mime_type: "image/png".to_owned(),
-        size: image.dimensions(),
-        wrap_u: Wrap::Repeat,
-        wrap_v: Wrap::Repeat,
-    })
 }
