@@ -106,16 +106,25 @@ pub fn describe_batch(
 
 /// Shape difference: the L2 distance between two Zernike descriptors (Table 1's z_diff).
 pub fn z_diff(a: &Descriptors, b: &Descriptors) -> f32 {
-    a.zernike
-        .iter()
-        .zip(&b.zernike)
-        .map(|(x, y)| (x - y) * (x - y))
-        .sum::<f32>()
-        .sqrt()
+    zernike_distance(&a.zernike, &b.zernike)
 }
 
 /// Texture difference: the L1 distance between two Color Structure Descriptors (Table 1's
 /// t_diff).
 pub fn t_diff(a: &Descriptors, b: &Descriptors) -> f32 {
-    a.csd.iter().zip(&b.csd).map(|(x, y)| (x - y).abs()).sum()
+    csd_distance(&a.csd, &b.csd)
+}
+
+/// [`z_diff`] on bare Zernike vectors (for descriptors stored apart from [`Descriptors`]).
+pub fn zernike_distance(a: &[f32], b: &[f32]) -> f32 {
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y) * (x - y))
+        .sum::<f32>()
+        .sqrt()
+}
+
+/// [`t_diff`] on bare CSD vectors.
+pub fn csd_distance(a: &[f32], b: &[f32]) -> f32 {
+    a.iter().zip(b).map(|(x, y)| (x - y).abs()).sum()
 }
