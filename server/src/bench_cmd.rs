@@ -26,10 +26,9 @@ use horizon_bvh::{
 use horizon_worldgen::rng::Rng;
 use serde::Serialize;
 
+use crate::world_cmd::EYE_HEIGHT;
 use crate::world_store::{DescriptorCache, WorldDir};
 
-/// Eye height of every viewpoint (metres above the ground plane y = 0; the worlds are Y-up).
-const EYE_HEIGHT: f32 = 2.0;
 /// Hysteresis of the standing query (the library's default).
 const HYSTERESIS: f32 = 0.1;
 
@@ -258,16 +257,7 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
         .node(bulk.root())
         .map(|r| r.aabb())
         .context("the tree has no root")?;
-    let mut rng = Rng::new(args.seed);
-    let viewpoints: Vec<Vec3> = (0..args.views)
-        .map(|_| {
-            Vec3::new(
-                bounds.min.x + rng.unit() * (bounds.max.x - bounds.min.x),
-                EYE_HEIGHT,
-                bounds.min.z + rng.unit() * (bounds.max.z - bounds.min.z),
-            )
-        })
-        .collect();
+    let viewpoints = crate::world_cmd::viewpoints(&bounds, args.seed, args.views);
 
     // 3. Cut queries on both trees, one core.
     progress("cut queries");
@@ -486,34 +476,29 @@ fn ms(t: Instant) -> f64 {
 fn query_stats(tree: &str, bvh: &Bvh, viewpoints: &[Vec3], args: &BenchArgs) -> QueryStats {
     let mut workspace = CutWorkspace::new();
     let mut cut = Cut::default();
-    let mut samples = Samples::default();
-    for &position in viewpoints {
-        let query = CutQuery {
-            position,
-            min_solid_angle: args.min_solid_angle,
-            max_results: args.max_results,
-        };
-        let t = Instant::now();
-        bvh.cut_into(&query, &mut workspace, &mut cut);
-        let cold = ms(t);
-        let t = Instant::now();
-        bvh.cut_into(&query, &mut workspace, &mut cut);
-        let warm = ms(t);
-        samples.push(
-            cold,
-            warm,
-            cut.nodes_visited,
-            cut.entries.len(),
-            args.max_results,
-        );
-    }
-    samples.finish(tree)
+    time_queries(tree, viewpoints, args, |query| {
+        bvh.cut_into(query, &mut workspace, &mut cut);
+        (cut.nodes_visited, cut.entries.len())
+    })
 }
 
 /// The same viewpoints on the obvhs baseline.
 fn spatial_stats(spatial: &SpatialBaseline, viewpoints: &[Vec3], args: &BenchArgs) -> QueryStats {
     let mut workspace = SpatialWorkspace::default();
     let mut cut = SpatialCut::default();
+    time_queries("obvhs SAH baseline", viewpoints, args, |query| {
+        spatial.cut_into(query, &mut workspace, &mut cut);
+        (cut.nodes_visited, cut.entries.len())
+    })
+}
+
+/// Runs `cut` twice per viewpoint (cold, then warm) and gathers its (nodes visited, entries).
+fn time_queries(
+    tree: &str,
+    viewpoints: &[Vec3],
+    args: &BenchArgs,
+    mut cut: impl FnMut(&CutQuery) -> (usize, usize),
+) -> QueryStats {
     let mut samples = Samples::default();
     for &position in viewpoints {
         let query = CutQuery {
@@ -522,20 +507,14 @@ fn spatial_stats(spatial: &SpatialBaseline, viewpoints: &[Vec3], args: &BenchArg
             max_results: args.max_results,
         };
         let t = Instant::now();
-        spatial.cut_into(&query, &mut workspace, &mut cut);
+        cut(&query);
         let cold = ms(t);
         let t = Instant::now();
-        spatial.cut_into(&query, &mut workspace, &mut cut);
+        let (visited, entries) = cut(&query);
         let warm = ms(t);
-        samples.push(
-            cold,
-            warm,
-            cut.nodes_visited,
-            cut.entries.len(),
-            args.max_results,
-        );
+        samples.push(cold, warm, visited, entries, args.max_results);
     }
-    samples.finish("obvhs SAH baseline")
+    samples.finish(tree)
 }
 
 /// A viewer at eye height walking 1 m per step from the centre of the world along a gently

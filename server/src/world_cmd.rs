@@ -12,7 +12,7 @@ use glam::{Affine3A, Vec3};
 use horizon_bvh::{
     Bvh, BvhOptions, CutItem, CutQuery, EntryKind, NewObject, ObjectId, SpatialBaseline, Sphere,
 };
-use horizon_descriptors::{describe, DescriptorOptions};
+use horizon_descriptors::{csd_distance, describe, zernike_distance, DescriptorOptions};
 use horizon_mesh::{export_glb, import_file, ExportOptions, ImportOptions, InstancedMesh};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -331,28 +331,13 @@ pub(crate) fn world_options(
     let z = median(
         pairs
             .iter()
-            .map(|&(a, b)| {
-                models[a]
-                    .zernike
-                    .iter()
-                    .zip(&models[b].zernike)
-                    .map(|(x, y)| (x - y) * (x - y))
-                    .sum::<f32>()
-                    .sqrt()
-            })
+            .map(|&(a, b)| zernike_distance(&models[a].zernike, &models[b].zernike))
             .collect(),
     );
     let t = median(
         pairs
             .iter()
-            .map(|&(a, b)| {
-                models[a]
-                    .csd
-                    .iter()
-                    .zip(&models[b].csd)
-                    .map(|(x, y)| (x - y).abs())
-                    .sum::<f32>()
-            })
+            .map(|&(a, b)| csd_distance(&models[a].csd, &models[b].csd))
             .collect(),
     );
     if z.is_finite() && z > 0.0 {
@@ -362,6 +347,24 @@ pub(crate) fn world_options(
         options.texture_scale = t;
     }
     options
+}
+
+/// Eye height of the benchmark viewers, metres (the worlds are Y-up, ground at 0).
+pub(crate) const EYE_HEIGHT: f32 = 2.0;
+
+/// `count` seeded viewpoints at eye height, uniform over the horizontal extent of `bounds`:
+/// the viewers of `horizon sweep` and `horizon bench-bvh`.
+pub(crate) fn viewpoints(bounds: &horizon_bvh::Aabb, seed: u64, count: usize) -> Vec<Vec3> {
+    let mut rng = horizon_worldgen::rng::Rng::new(seed);
+    (0..count)
+        .map(|_| {
+            Vec3::new(
+                bounds.min.x + rng.unit() * (bounds.max.x - bounds.min.x),
+                EYE_HEIGHT,
+                bounds.min.z + rng.unit() * (bounds.max.z - bounds.min.z),
+            )
+        })
+        .collect()
 }
 
 pub(crate) fn new_objects<'a>(
@@ -450,14 +453,8 @@ pub fn sweep(
         let input = new_objects(&manifest, &objects, &cache)?;
         // Mean nodes visited, cut size and seconds over the same seeded viewpoints.
         let measure = |bounds: &horizon_bvh::Aabb, cut: &dyn Fn(&CutQuery) -> (usize, usize)| {
-            let mut rng = horizon_worldgen::rng::Rng::new(seed);
             let (mut visited, mut size, mut seconds) = (0usize, 0usize, 0.0f64);
-            for _ in 0..views {
-                let position = Vec3::new(
-                    bounds.min.x + rng.unit() * (bounds.max.x - bounds.min.x),
-                    2.0,
-                    bounds.min.z + rng.unit() * (bounds.max.z - bounds.min.z),
-                );
+            for position in viewpoints(bounds, seed, views) {
                 let query = CutQuery {
                     position,
                     min_solid_angle,
