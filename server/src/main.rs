@@ -12,6 +12,7 @@
 //! - `bench_cmd.rs`: `horizon bench-bvh`, issue 5's targets measured on a built world.
 //! - `demo.rs`: `horizon demo`, the main job on an embedded default model set.
 
+mod aggregate_cmd;
 mod bench_cmd;
 mod demo;
 mod descriptors_cmd;
@@ -105,7 +106,45 @@ enum Command {
         /// Eq. 1's w: texture against shape, in [0, 1].
         #[arg(long, default_value_t = 0.2)]
         omega: f32,
+        /// Worker threads (default: every core).
+        #[arg(long)]
+        jobs: Option<usize>,
+        /// Build the BVH only, no aggregates.
+        #[arg(long)]
+        bvh_only: bool,
+        /// Screen pixels per aggregate triangle at its nearest display distance.
+        #[arg(long, default_value_t = 16.0)]
+        pixels_per_triangle: f64,
+        /// The smallest solid angle clients ask to see as itself (sets aggregate budgets).
+        #[arg(long, default_value_t = 1e-3)]
+        min_solid_angle: f64,
+        /// When aggregates get one atlas texture: always, auto (the paper's rule: more than
+        /// 100 textures or 64 MB of them in the world) or never.
+        #[arg(long, value_enum, default_value = "always")]
+        atlas: AtlasArg,
         /// Print the summary as JSON.
+        #[arg(long)]
+        json: bool,
+    },
+    /// The join download of a built world: for seeded viewpoints, the unique bytes of every
+    /// asset in the cut, with draw calls and textures, against every model of the world
+    /// (naive) and against unoptimised aggregates (built into DIR/baseline on first use).
+    Report {
+        /// The built world directory.
+        dir: PathBuf,
+        /// Number of seeded viewpoints.
+        #[arg(long, default_value_t = 10)]
+        views: usize,
+        /// Seed of the viewpoints.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Smallest solid angle (steradians) shown as itself.
+        #[arg(long, default_value_t = 1e-3)]
+        min_solid_angle: f32,
+        /// Most entries in a cut.
+        #[arg(long, default_value_t = 4000)]
+        max_results: usize,
+        /// Print JSON instead of text.
         #[arg(long)]
         json: bool,
     },
@@ -259,6 +298,41 @@ enum MeshCommand {
     },
 }
 
+/// `--atlas` of `horizon build`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+enum AtlasArg {
+    /// Every aggregate gets one material and one texture.
+    Always,
+    /// The paper's rule: only worlds with more than 100 textures or 64 MB of them.
+    Auto,
+    /// Aggregates keep their source materials.
+    Never,
+}
+
+impl From<AtlasArg> for horizon_aggregate::AtlasPolicy {
+    fn from(a: AtlasArg) -> Self {
+        match a {
+            AtlasArg::Always => Self::Always,
+            AtlasArg::Auto => Self::Auto,
+            AtlasArg::Never => Self::Never,
+        }
+    }
+}
+
+/// Sizes rayon's global pool (`--jobs`).
+fn set_jobs(jobs: Option<usize>) -> anyhow::Result<()> {
+    if let Some(n) = jobs {
+        if n == 0 {
+            anyhow::bail!("--jobs must be at least 1");
+        }
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(n)
+            .build_global()
+            .map_err(|e| anyhow::anyhow!("cannot start {n} worker threads: {e}"))?;
+    }
+    Ok(())
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
@@ -309,8 +383,28 @@ fn main() -> ExitCode {
             dir,
             mu,
             omega,
+            jobs,
+            bvh_only,
+            pixels_per_triangle,
+            min_solid_angle,
+            atlas,
             json,
-        } => world_cmd::build(&dir, mu, omega, json),
+        } => set_jobs(jobs).and_then(|()| {
+            let args = (!bvh_only).then_some(aggregate_cmd::AggregateArgs {
+                pixels_per_triangle,
+                min_solid_angle,
+                atlas: atlas.into(),
+            });
+            world_cmd::build(&dir, mu, omega, args, json)
+        }),
+        Command::Report {
+            dir,
+            views,
+            seed,
+            min_solid_angle,
+            max_results,
+            json,
+        } => aggregate_cmd::report(&dir, views, seed, min_solid_angle, max_results, json),
         Command::Cut {
             dir,
             pos,

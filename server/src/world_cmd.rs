@@ -168,10 +168,18 @@ struct BuildSummary {
     descriptor_seconds: f64,
     bvh_seconds: f64,
     write_seconds: f64,
+    /// The aggregate stage, unless `--bvh-only`.
+    aggregates: Option<horizon_aggregate::BuildReport>,
 }
 
 /// Builds the BVH of the world in `dir` with eq. 1's `mu` and `w` and stores its snapshot.
-pub fn build(dir: &Path, mu: f32, w: f32, json: bool) -> anyhow::Result<()> {
+pub fn build(
+    dir: &Path,
+    mu: f32,
+    w: f32,
+    aggregates: Option<crate::aggregate_cmd::AggregateArgs>,
+    json: bool,
+) -> anyhow::Result<()> {
     let progress = std::io::stderr().is_terminal();
     let note = |msg: &str| {
         if progress {
@@ -253,6 +261,23 @@ pub fn build(dir: &Path, mu: f32, w: f32, json: bool) -> anyhow::Result<()> {
     WorldDir::write_json(&store.bvh(), &bvh)?;
     let write_seconds = t3.elapsed().as_secs_f64();
 
+    // Every node's aggregate (issue 6).
+    let aggregates = match aggregates {
+        Some(args) => {
+            note("loading models");
+            let models = crate::aggregate_cmd::load_models(&store, &manifest, &cache)?;
+            let report = crate::aggregate_cmd::build_into(
+                &bvh,
+                &models,
+                &crate::aggregate_cmd::aggregate_store(dir),
+                args.options(),
+                "aggregates",
+            )?;
+            Some(report)
+        }
+        None => None,
+    };
+
     let summary = BuildSummary {
         objects: bvh.len(),
         models: manifest.models.len(),
@@ -264,6 +289,7 @@ pub fn build(dir: &Path, mu: f32, w: f32, json: bool) -> anyhow::Result<()> {
         descriptor_seconds,
         bvh_seconds,
         write_seconds,
+        aggregates,
     };
     if json {
         println!("{}", serde_json::to_string(&summary)?);
@@ -282,6 +308,27 @@ pub fn build(dir: &Path, mu: f32, w: f32, json: bool) -> anyhow::Result<()> {
             bvh_seconds,
             write_seconds
         );
+        if let Some(a) = &summary.aggregates {
+            println!(
+                "aggregates: {} nodes, {} built, {} reused, {} failed; {:.1} MB written, {:.1} MB in all; {:.1} s{}",
+                a.nodes,
+                a.built,
+                a.reused,
+                a.failed.len(),
+                a.bytes_built as f64 / 1e6,
+                a.bytes_total as f64 / 1e6,
+                a.seconds,
+                if a.atlas { ", atlased" } else { "" }
+            );
+        }
+    }
+    if let Some(a) = &summary.aggregates {
+        if let Some((node, reason)) = a.failed.first() {
+            anyhow::bail!(
+                "{} aggregates failed (first: node {node}: {reason})",
+                a.failed.len()
+            );
+        }
     }
     Ok(())
 }

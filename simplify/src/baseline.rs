@@ -83,5 +83,6 @@ pub fn simplify_meshopt(mesh: &InstancedMesh, target: Target) -> Result<Simplifi
             error: f64::from(error) * diagonal / 3f64.sqrt(),
             seconds,
         },
+        kept: Vec::new(),
     })
 }

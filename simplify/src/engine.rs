@@ -990,7 +990,9 @@ impl Workspace {
     /// Stage 4: the simplified mesh: surviving wedges of each submesh, compacted, with the
     /// input's materials, textures and instances. Submeshes left without triangles go, with
     /// their instances.
-    pub(crate) fn assemble(&self, mesh: &InstancedMesh) -> InstancedMesh {
+    /// The simplified mesh, and for every input submesh its index in the output (`None` when it
+    /// lost all its triangles and was dropped with its instances).
+    pub(crate) fn assemble(&self, mesh: &InstancedMesh) -> (InstancedMesh, Vec<Option<usize>>) {
         let mut out_subs: Vec<Option<Submesh>> = mesh.submeshes.iter().cloned().map(Some).collect();
         let mut remap = vec![DEAD; self.wedge_pos.len()];
         for info in &self.subs {
@@ -1041,12 +1043,17 @@ impl Workspace {
                 transform: i.transform,
             })
             .collect();
-        InstancedMesh {
+        let out = InstancedMesh {
             submeshes,
             instances,
             materials: mesh.materials.clone(),
             textures: mesh.textures.clone(),
-        }
+        };
+        let kept = index
+            .into_iter()
+            .map(|i| (i != usize::MAX).then_some(i))
+            .collect();
+        (out, kept)
     }
 }
 

@@ -48,6 +48,9 @@ pub struct Simplified {
     pub mesh: InstancedMesh,
     /// Counts, error and time.
     pub report: SimplifyReport,
+    /// For every input submesh, its index in `mesh`, or `None` if it lost all its triangles.
+    /// Empty for [`simplify_meshopt`], which merges every submesh into one.
+    pub kept: Vec<Option<usize>>,
 }
 
 /// Instance-aware simplification of `mesh` down to `target` expanded triangles.
@@ -111,7 +114,7 @@ fn run_engine(
     let loaded = workspace.load(mesh, &sets);
     workspace.build_quadrics(&sets, options);
     let stats = workspace.run(loaded, triangles_target, options);
-    let out = workspace.assemble(mesh);
+    let (out, kept) = workspace.assemble(mesh);
     let report = SimplifyReport {
         method: "ias",
         triangles_in,
@@ -124,7 +127,11 @@ fn run_engine(
         seconds: start.elapsed().as_secs_f64(),
     };
     debug_assert_eq!(report.triangles_out, stats.expanded);
-    Simplified { mesh: out, report }
+    Simplified {
+        mesh: out,
+        report,
+        kept,
+    }
 }
 
 /// The baseline: `mesh` expanded into one instance, then the same engine. The reported time

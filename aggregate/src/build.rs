@@ -1,0 +1,426 @@
+//! The offline aggregate rebuild (core paper section 5): every internal... every node of the
+//! BVH gets an aggregate, built bottom-up and in parallel by tree level (rayon).
+//!
+//! **Keys and dirty tracking.** Every node has a key: the hash of the options and, for a
+//! leaf, its objects (model content hash and transform), for an internal node, its children's
+//! keys. A key changes exactly when something below the node changed, so after adding,
+//! moving or removing k objects only their ancestors (and nodes a split reshaped) have new
+//! keys; every other aggregate is found in the store under its unchanged key and reused.
+//! Computing the keys hashes each object once (milliseconds for a city); the aggregates
+//! rebuilt are O(k log n). A dirty node whose children were reused reads their handoffs
+//! back from the store's parts files.
+
+use std::collections::{BTreeMap, HashMap};
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::Instant;
+
+use horizon_bvh::{Bvh, NodeId, ObjectId};
+use horizon_descriptors::calibrate::Table1;
+use horizon_mesh::{export_glb, import_bytes, ExportOptions, Format, ImportOptions, Instance};
+use horizon_mesh::{InstancedMesh, Submesh};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use crate::budget::Display;
+use crate::error::AggregateError;
+use crate::generate::{generate, Handoff, NodeInput, PartKey, Placement};
+use crate::options::{AggregateOptions, AtlasPolicy, Method};
+use crate::source::ModelSource;
+use crate::store::{AggregateEntry, AggregateManifest, AggregateStore, KeyHasher, PartList};
+
+/// One node's outcome in a level: its entry (if any), its handoff (if built), whether built.
+type LevelResult = (NodeId, Option<AggregateEntry>, Option<Arc<Handoff>>, bool);
+
+/// Textures above which [`AtlasPolicy::Auto`] atlases (the paper's rule, section 7).
+pub const AUTO_ATLAS_TEXTURES: usize = 100;
+/// Texture bytes above which [`AtlasPolicy::Auto`] atlases.
+pub const AUTO_ATLAS_BYTES: u64 = 64 * 1024 * 1024;
+
+/// What the rebuild is asked for.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BuildOptions {
+    /// Options of every aggregate.
+    pub aggregate: AggregateOptions,
+    /// The world's texture count and encoded bytes (for [`AtlasPolicy::Auto`]).
+    pub world_textures: (usize, u64),
+    /// Stop with [`AggregateError::Interrupted`] after building this many aggregates,
+    /// without writing the manifest: crash injection for tests.
+    pub stop_after: Option<usize>,
+}
+
+/// Progress of a rebuild, for a progress bar.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Progress {
+    /// Aggregates built or reused so far.
+    pub done: usize,
+    /// Aggregates in the tree.
+    pub total: usize,
+}
+
+/// What a rebuild did.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct BuildReport {
+    /// Nodes in the tree (each gets an aggregate).
+    pub nodes: usize,
+    /// Aggregates built by this run.
+    pub built: usize,
+    /// Aggregates found in the store under their key.
+    pub reused: usize,
+    /// Aggregates that failed, with the reason (their parents were built without them).
+    pub failed: Vec<(u32, String)>,
+    /// Bytes of the aggregates built by this run.
+    pub bytes_built: u64,
+    /// Bytes of every aggregate of the tree.
+    pub bytes_total: u64,
+    /// Whether aggregates were atlased.
+    pub atlas: bool,
+    /// Wall time.
+    pub seconds: f64,
+    /// Nodes rebuilt that are not ancestors of... (filled by callers that know the change
+    /// set; 0 otherwise).
+    pub levels: usize,
+}
+
+/// Builds (or reuses) the aggregate of every node of `bvh` into `store`.
+pub fn build_aggregates(
+    bvh: &Bvh,
+    models: &dyn ModelSource,
+    store: &AggregateStore,
+    options: &BuildOptions,
+    progress: &(dyn Fn(Progress) + Sync),
+) -> Result<BuildReport, AggregateError> {
+    let start = Instant::now();
+    options
+        .aggregate
+        .validate()
+        .map_err(|e| AggregateError::Tree(format!("bad options: {e}")))?;
+    // Stage 1: levels and keys.
+    let atlas = resolve_atlas(options);
+    let levels = levels(bvh);
+    let keys = node_keys(bvh, models, &levels, &options.aggregate, atlas)?;
+    let root_key = keys.get(&bvh.root()).cloned().unwrap_or_default();
+    // Stage 2: what the store already has.
+    let mut known = store.known()?;
+    if options.aggregate.method == Method::Unoptimized {
+        // Baseline handoffs are not persisted: reuse all of a matching build or nothing.
+        let complete = store.manifest()?.is_some_and(|m| m.root_key == root_key);
+        if !complete {
+            known.clear();
+        }
+    }
+    // Stage 3: bottom-up, one level at a time, nodes of a level in parallel.
+    let table = Table1::calibrated();
+    let total: usize = levels.iter().map(Vec::len).sum();
+    let done = AtomicUsize::new(0);
+    let built_count = AtomicUsize::new(0);
+    let mut entries: BTreeMap<u32, AggregateEntry> = BTreeMap::new();
+    let mut report = BuildReport {
+        nodes: total,
+        atlas,
+        levels: levels.len(),
+        ..BuildReport::default()
+    };
+    let failed: Mutex<Vec<(u32, String)>> = Mutex::new(Vec::new());
+    let mut below: HashMap<NodeId, Arc<Handoff>> = HashMap::new();
+    for level in levels.iter().rev() {
+        let results: Vec<LevelResult> = level
+            .par_iter()
+            .map(|&node| {
+                let key = &keys[&node];
+                if let Some(e) = known.get(key) {
+                    done.fetch_add(1, Ordering::Relaxed);
+                    progress(Progress {
+                        done: done.load(Ordering::Relaxed),
+                        total,
+                    });
+                    return Ok((node, Some(e.clone()), None, false));
+                }
+                if let Some(limit) = options.stop_after {
+                    if built_count.load(Ordering::SeqCst) >= limit {
+                        return Err(AggregateError::Interrupted(limit));
+                    }
+                }
+                let children = child_handoffs(bvh, node, &below, &known, &keys, store, models);
+                let input = node_input(bvh, node, children, &options.aggregate, atlas)?;
+                let outcome =
+                    generate(&input, models, &table, &options.aggregate).and_then(|out| {
+                        let parts = encode_parts(node.0, &out.handoff, models)?;
+                        let entry = store.put(
+                            key.clone(),
+                            &out.glb,
+                            parts.as_ref().map(|(b, k)| (b.as_slice(), k.clone())),
+                            out.stats,
+                        )?;
+                        Ok((entry, out.handoff))
+                    });
+                built_count.fetch_add(1, Ordering::SeqCst);
+                done.fetch_add(1, Ordering::Relaxed);
+                progress(Progress {
+                    done: done.load(Ordering::Relaxed),
+                    total,
+                });
+                match outcome {
+                    Ok((entry, handoff)) => Ok((node, Some(entry), Some(Arc::new(handoff)), true)),
+                    Err(e @ AggregateError::Io { .. }) => Err(e),
+                    Err(e) => {
+                        if let Ok(mut f) = failed.lock() {
+                            f.push((node.0, e.to_string()));
+                        }
+                        Ok((node, None, None, true))
+                    }
+                }
+            })
+            .collect::<Result<_, AggregateError>>()?;
+        let mut next = HashMap::new();
+        for (node, entry, handoff, built) in results {
+            if let Some(e) = entry {
+                if built {
+                    report.built += 1;
+                    report.bytes_built += e.stats.bytes as u64;
+                } else {
+                    report.reused += 1;
+                }
+                report.bytes_total += e.stats.bytes as u64;
+                entries.insert(node.0, e);
+            }
+            if let Some(h) = handoff {
+                next.insert(node, h);
+            }
+        }
+        below = next;
+    }
+    report.failed = failed.into_inner().unwrap_or_default();
+    report.failed.sort();
+    // Stage 4: the manifest, last.
+    store.write_manifest(&AggregateManifest {
+        format: crate::FORMAT,
+        options: options.aggregate,
+        atlas,
+        root_key,
+        nodes: entries,
+    })?;
+    report.seconds = start.elapsed().as_secs_f64();
+    Ok(report)
+}
+
+/// Whether aggregates are atlased under `options`.
+pub fn resolve_atlas(options: &BuildOptions) -> bool {
+    match options.aggregate.atlas {
+        AtlasPolicy::Always => true,
+        AtlasPolicy::Never => false,
+        AtlasPolicy::Auto => {
+            options.world_textures.0 > AUTO_ATLAS_TEXTURES
+                || options.world_textures.1 > AUTO_ATLAS_BYTES
+        }
+    }
+}
+
+/// The tree's nodes by depth, root first.
+pub fn levels(bvh: &Bvh) -> Vec<Vec<NodeId>> {
+    let mut out: Vec<Vec<NodeId>> = Vec::new();
+    if bvh.is_empty() {
+        return out;
+    }
+    let mut current = vec![bvh.root()];
+    while !current.is_empty() {
+        let mut next = Vec::new();
+        for &n in &current {
+            if let Some(node) = bvh.node(n) {
+                next.extend(node.child_nodes());
+            }
+        }
+        out.push(current);
+        current = next;
+    }
+    out
+}
+
+/// Every node's key, bottom-up.
+pub fn node_keys(
+    bvh: &Bvh,
+    models: &dyn ModelSource,
+    levels: &[Vec<NodeId>],
+    options: &AggregateOptions,
+    atlas: bool,
+) -> Result<HashMap<NodeId, String>, AggregateError> {
+    let fingerprint = format!("{}|atlas={atlas}", options.fingerprint());
+    let mut keys: HashMap<NodeId, String> = HashMap::new();
+    for level in levels.iter().rev() {
+        let computed: Vec<(NodeId, String)> = level
+            .par_iter()
+            .map(|&n| -> Result<(NodeId, String), AggregateError> {
+                let node = bvh
+                    .node(n)
+                    .ok_or_else(|| AggregateError::Tree(format!("no node {}", n.0)))?;
+                let mut parts: Vec<Vec<u8>> = Vec::new();
+                if node.is_leaf() {
+                    for o in node.objects() {
+                        let obj = bvh
+                            .object(o)
+                            .ok_or_else(|| AggregateError::Tree(format!("no object {}", o.0)))?;
+                        let mut bytes = models.model(obj.model())?.hash.clone().into_bytes();
+                        for v in obj.transform().to_cols_array() {
+                            bytes.extend_from_slice(&v.to_bits().to_le_bytes());
+                        }
+                        parts.push(bytes);
+                    }
+                } else {
+                    for c in node.child_nodes() {
+                        let k = keys
+                            .get(&c)
+                            .ok_or_else(|| AggregateError::Tree(format!("no key for {}", c.0)))?;
+                        parts.push(k.clone().into_bytes());
+                    }
+                }
+                parts.sort();
+                let mut h = KeyHasher::new();
+                h.write(fingerprint.as_bytes());
+                h.write(if node.is_leaf() { b"L" } else { b"I" });
+                for p in &parts {
+                    h.write(&(p.len() as u64).to_le_bytes());
+                    h.write(p);
+                }
+                Ok((n, h.finish_hex()))
+            })
+            .collect::<Result<_, _>>()?;
+        keys.extend(computed);
+    }
+    Ok(keys)
+}
+
+/// The input of one node's aggregate.
+fn node_input(
+    bvh: &Bvh,
+    node: NodeId,
+    children: Vec<Arc<Handoff>>,
+    options: &AggregateOptions,
+    atlas: bool,
+) -> Result<NodeInput, AggregateError> {
+    let n = bvh
+        .node(node)
+        .ok_or_else(|| AggregateError::Tree(format!("no node {}", node.0)))?;
+    let bound = n.bound();
+    let mut ids: Vec<ObjectId> = Vec::new();
+    bvh.objects_under(node, &mut ids);
+    let mut placements: Vec<Placement> = ids
+        .iter()
+        .filter_map(|&o| bvh.object(o))
+        .map(|o| Placement {
+            model: o.model(),
+            transform: o.transform(),
+            centre: o.sphere().centre,
+            radius: o.sphere().radius,
+        })
+        .collect();
+    placements.sort_by(|a, b| {
+        a.model.cmp(&b.model).then_with(|| {
+            let (x, y) = (a.transform.to_cols_array(), b.transform.to_cols_array());
+            x.iter()
+                .zip(&y)
+                .map(|(p, q)| p.total_cmp(q))
+                .find(|o| o.is_ne())
+                .unwrap_or(std::cmp::Ordering::Equal)
+        })
+    });
+    Ok(NodeInput {
+        node: node.0,
+        display: Display::of(bound.centre, bound.radius, n.r_max(), options),
+        outer_radius: n.outer_sphere().radius,
+        placements,
+        children,
+        atlas,
+    })
+}
+
+/// The handoffs of `node`'s child nodes: built this run, or read back from the store.
+fn child_handoffs(
+    bvh: &Bvh,
+    node: NodeId,
+    below: &HashMap<NodeId, Arc<Handoff>>,
+    known: &HashMap<String, AggregateEntry>,
+    keys: &HashMap<NodeId, String>,
+    store: &AggregateStore,
+    models: &dyn ModelSource,
+) -> Vec<Arc<Handoff>> {
+    let Some(n) = bvh.node(node) else {
+        return Vec::new();
+    };
+    let mut out = Vec::new();
+    let mut children: Vec<NodeId> = n.child_nodes().collect();
+    children.sort_by(|a, b| keys.get(a).cmp(&keys.get(b)));
+    for c in children {
+        if let Some(h) = below.get(&c) {
+            out.push(h.clone());
+        } else if let Some(h) = keys
+            .get(&c)
+            .and_then(|k| known.get(k))
+            .and_then(|e| decode_parts(store, e, models))
+        {
+            out.push(Arc::new(h));
+        }
+    }
+    out
+}
+
+/// The parts file of a handoff: every version as one submesh with one identity instance, no
+/// materials (the parent takes materials from the source models), and its (model hash,
+/// submesh) list. `None` for handoffs that are not persisted.
+fn encode_parts(
+    node: u32,
+    handoff: &Handoff,
+    models: &dyn ModelSource,
+) -> Result<Option<(Vec<u8>, PartList)>, AggregateError> {
+    let Handoff::Versions(versions) = handoff else {
+        return Ok(None);
+    };
+    let mut mesh = InstancedMesh::default();
+    let mut keys = Vec::new();
+    for (&(model, s), sub) in versions {
+        let hash = models.model(model)?.hash.clone();
+        mesh.instances.push(Instance {
+            submesh: mesh.submeshes.len(),
+            transform: glam::Affine3A::IDENTITY,
+        });
+        mesh.submeshes.push(Submesh {
+            material: None,
+            ..(**sub).clone()
+        });
+        keys.push((hash, s));
+    }
+    let bytes = export_glb(&mesh, &ExportOptions::plain()).map_err(|e| AggregateError::Glb {
+        node,
+        reason: e.to_string(),
+    })?;
+    Ok(Some((bytes, keys)))
+}
+
+/// Reads a handoff back from its parts file; `None` if it is missing or does not match its
+/// entry (the parent then falls back to the source models).
+fn decode_parts(
+    store: &AggregateStore,
+    entry: &AggregateEntry,
+    models: &dyn ModelSource,
+) -> Option<Handoff> {
+    let hash = entry.parts.as_ref()?;
+    let bytes = std::fs::read(store.parts(hash)).ok()?;
+    let mesh = import_bytes(&bytes, Format::Glb, None, &ImportOptions::trusted())
+        .ok()?
+        .mesh;
+    if mesh.submeshes.len() != entry.part_keys.len() {
+        return None;
+    }
+    let mut versions: BTreeMap<PartKey, Arc<Submesh>> = BTreeMap::new();
+    for (sub, (hash, s)) in mesh.submeshes.into_iter().zip(&entry.part_keys) {
+        let model = models.by_hash(hash)?;
+        let material = models
+            .model(model)
+            .ok()?
+            .mesh
+            .submeshes
+            .get(*s as usize)?
+            .material;
+        versions.insert((model, *s), Arc::new(Submesh { material, ..sub }));
+    }
+    Some(Handoff::Versions(versions))
+}

@@ -1,0 +1,510 @@
+//! One node's aggregate (core paper sections 5 to 7): gather the children's representations,
+//! cull what cannot show, dedup near-duplicates (Table 1), merge into one instanced mesh,
+//! simplify with IAS to the node's budget, atlas, encode.
+//!
+//! What a node hands its parent ([`Handoff`]) is not its final GLB but the simplified
+//! version of every model submesh it drew, in model space. The parent then instances one
+//! version per model submesh across all its children (the coarsest, which is the closest to
+//! what the parent needs), so instancing survives all the way up the tree instead of every
+//! child aggregate becoming one more unique mesh. Textures always come from the source
+//! models, never from a child's atlas, so they are resampled once.
+
+use std::collections::{BTreeMap, HashMap};
+use std::sync::Arc;
+use std::time::Instant;
+
+use glam::{Affine3A, Vec3};
+use horizon_atlas::{build_atlas, AtlasOptions};
+use horizon_descriptors::calibrate::Table1;
+use horizon_mesh::{export_glb, ExportOptions, Instance, InstancedMesh, Material, Submesh};
+use horizon_simplify::{simplify, simplify_qem, SimplifyOptions, Target};
+use serde::{Deserialize, Serialize};
+
+use crate::budget::{dedup_distance, Display};
+use crate::dedup::{plan, ModelUse};
+use crate::error::AggregateError;
+use crate::options::{AggregateOptions, Method};
+use crate::source::{ModelSource, SourceModel};
+
+/// A model submesh: (model number, submesh index in the model).
+pub type PartKey = (u64, u32);
+
+/// One object placed under the node.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Placement {
+    /// The BVH's model number.
+    pub model: u64,
+    /// Model-to-world transform.
+    pub transform: Affine3A,
+    /// Centre of its world bounding sphere.
+    pub centre: Vec3,
+    /// Radius of its world bounding sphere.
+    pub radius: f32,
+}
+
+/// What a built node hands its parent.
+#[derive(Clone, Debug)]
+pub enum Handoff {
+    /// The optimised pipeline: the simplified version of every model submesh drawn.
+    Versions(BTreeMap<PartKey, Arc<Submesh>>),
+    /// The unoptimised baseline: the whole simplified mesh, world space, single instances.
+    Expanded(Arc<ExpandedPart>),
+}
+
+/// The unoptimised baseline's handoff: a world-space mesh and where its materials came from.
+#[derive(Clone, Debug)]
+pub struct ExpandedPart {
+    /// Single-instance submeshes in world space.
+    pub mesh: InstancedMesh,
+    /// For each material, its source (model, material index).
+    pub material_keys: Vec<(u64, usize)>,
+}
+
+/// Everything one node's aggregate is made from.
+#[derive(Debug)]
+pub struct NodeInput {
+    /// The node's number (for messages).
+    pub node: u32,
+    /// Where it can be shown (budgets).
+    pub display: Display,
+    /// Radius of a sphere holding the whole aggregate (for the dedup distance).
+    pub outer_radius: f32,
+    /// Every object under the node.
+    pub placements: Vec<Placement>,
+    /// The handoffs of the node's child nodes that have one (none for a leaf).
+    pub children: Vec<Arc<Handoff>>,
+    /// Whether to atlas (resolved from the policy by the caller).
+    pub atlas: bool,
+}
+
+/// What building one aggregate did.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct NodeStats {
+    /// Objects under the node.
+    pub placements: usize,
+    /// Objects left out as smaller than `cull_pixels`.
+    pub culled: usize,
+    /// Distinct models drawn before dedup.
+    pub models: usize,
+    /// Models replaced by a near-duplicate.
+    pub replaced: usize,
+    /// The triangle budget.
+    pub budget: u64,
+    /// Expanded triangles of the merge.
+    pub triangles_in: u64,
+    /// Expanded triangles of the aggregate.
+    pub triangles_out: u64,
+    /// Triangles stored (unique) in the aggregate.
+    pub unique_triangles: u64,
+    /// Submeshes and instances in the aggregate.
+    pub submeshes: usize,
+    /// Instances in the aggregate.
+    pub instances: usize,
+    /// Materials and textures in the aggregate.
+    pub materials: usize,
+    /// Textures in the aggregate.
+    pub textures: usize,
+    /// Encoded texture bytes in the aggregate.
+    pub texture_bytes: usize,
+    /// GLB bytes.
+    pub bytes: usize,
+}
+
+/// A built aggregate.
+#[derive(Debug)]
+pub struct NodeOutput {
+    /// The aggregate as a GLB.
+    pub glb: Vec<u8>,
+    /// What the parent gets.
+    pub handoff: Handoff,
+    /// What it took.
+    pub stats: NodeStats,
+}
+
+/// Builds one node's aggregate.
+pub fn generate(
+    input: &NodeInput,
+    models: &dyn ModelSource,
+    table: &Table1,
+    options: &AggregateOptions,
+) -> Result<NodeOutput, AggregateError> {
+    match options.method {
+        Method::Optimized => generate_optimized(input, models, table, options),
+        Method::Unoptimized => generate_unoptimized(input, models, options),
+    }
+}
+
+fn generate_optimized(
+    input: &NodeInput,
+    models: &dyn ModelSource,
+    table: &Table1,
+    options: &AggregateOptions,
+) -> Result<NodeOutput, AggregateError> {
+    let _start = Instant::now();
+    let mut stats = NodeStats {
+        placements: input.placements.len(),
+        budget: input.display.triangle_budget(options),
+        ..NodeStats::default()
+    };
+    // Stage 1, gather: the coarsest version of every model submesh among the children.
+    let versions = coarsest_versions(&input.children);
+    // Stage 2, cull: objects under `cull_pixels` at the nearest display distance cannot show.
+    let kept = cull(input, options);
+    stats.culled = input.placements.len() - kept.len();
+    // Stage 3, dedup (section 5.1).
+    let sources = load_models(kept.iter().map(|p| p.model), models)?;
+    let replacements = if options.dedup {
+        dedup_plan(input, &kept, &sources, table, options)
+    } else {
+        BTreeMap::new()
+    };
+    stats.models = sources.len();
+    stats.replaced = replacements.len();
+    let mut sources = sources;
+    for r in replacements.values() {
+        if let std::collections::btree_map::Entry::Vacant(e) = sources.entry(r.by) {
+            e.insert(models.model(r.by)?);
+        }
+    }
+    // Stage 4, merge: one submesh per drawn model submesh, one instance per placement and
+    // model-internal instance.
+    let mut merge = Merger::default();
+    let mut part_of_submesh: Vec<PartKey> = Vec::new();
+    let mut slot: HashMap<PartKey, Option<usize>> = HashMap::new();
+    for p in &kept {
+        let (model, align) = match replacements.get(&p.model) {
+            Some(r) => (r.by, r.align),
+            None => (p.model, Affine3A::IDENTITY),
+        };
+        let source = &sources[&model];
+        let has_versions = versions
+            .range((model, 0)..=(model, u32::MAX))
+            .next()
+            .is_some();
+        for (s, inner) in source.placements.iter().enumerate() {
+            let key = (model, s as u32);
+            let index = *slot.entry(key).or_insert_with(|| {
+                let sub: Option<Submesh> = if input.children.is_empty() || !has_versions {
+                    Some(source.mesh.submeshes[s].clone())
+                } else {
+                    versions.get(&key).map(|v| (**v).clone())
+                };
+                sub.map(|sub| {
+                    part_of_submesh.push(key);
+                    merge.submesh(model, source, sub)
+                })
+            });
+            let Some(index) = index else { continue };
+            for m in inner {
+                merge.mesh.instances.push(Instance {
+                    submesh: index,
+                    transform: p.transform * align * *m,
+                });
+            }
+        }
+    }
+    let merged = merge.mesh;
+    stats.triangles_in = merged.expanded_triangle_count();
+    // Stage 5, simplify with IAS to the budget.
+    let (simplified, kept_parts) = if stats.triangles_in > stats.budget {
+        let s = simplify(
+            &merged,
+            Target::Triangles(stats.budget),
+            &SimplifyOptions::default(),
+        )
+        .map_err(|source| AggregateError::Simplify {
+            node: input.node,
+            source,
+        })?;
+        (s.mesh, s.kept)
+    } else {
+        let n = merged.submeshes.len();
+        (merged, (0..n).map(Some).collect())
+    };
+    let handoff = Handoff::Versions(
+        part_of_submesh
+            .iter()
+            .zip(&kept_parts)
+            .filter_map(|(key, k)| k.map(|k| (*key, Arc::new(simplified.submeshes[k].clone()))))
+            .collect(),
+    );
+    // Stage 6, atlas (section 7) and encode.
+    let out = if input.atlas {
+        let atlas_options = AtlasOptions {
+            max_bytes: options.atlas_bytes,
+            max_side: input.display.atlas_side(),
+            ..AtlasOptions::default()
+        };
+        build_atlas(&simplified, &atlas_options)
+            .map_err(|source| AggregateError::Atlas {
+                node: input.node,
+                source,
+            })?
+            .0
+    } else {
+        simplified
+    };
+    finish(input.node, out, handoff, stats)
+}
+
+/// The unoptimised baseline: children expanded into one mesh, QEM to the same budget.
+fn generate_unoptimized(
+    input: &NodeInput,
+    models: &dyn ModelSource,
+    options: &AggregateOptions,
+) -> Result<NodeOutput, AggregateError> {
+    let mut stats = NodeStats {
+        placements: input.placements.len(),
+        budget: input.display.triangle_budget(options),
+        ..NodeStats::default()
+    };
+    let mut merge = Merger::default();
+    if input.children.is_empty() {
+        let sources = load_models(input.placements.iter().map(|p| p.model), models)?;
+        stats.models = sources.len();
+        for p in &input.placements {
+            let source = &sources[&p.model];
+            for (s, inner) in source.placements.iter().enumerate() {
+                let index = merge.submesh(p.model, source, source.mesh.submeshes[s].clone());
+                for m in inner {
+                    merge.mesh.instances.push(Instance {
+                        submesh: index,
+                        transform: p.transform * *m,
+                    });
+                }
+            }
+        }
+    } else {
+        for child in &input.children {
+            let Handoff::Expanded(part) = child.as_ref() else {
+                continue;
+            };
+            merge.expanded(part);
+        }
+    }
+    let material_keys = merge.material_keys.clone();
+    let merged = merge.mesh;
+    stats.triangles_in = merged.expanded_triangle_count();
+    let target = Target::Triangles(stats.budget.min(stats.triangles_in));
+    let simplified = simplify_qem(&merged, target, &SimplifyOptions::default())
+        .map_err(|source| AggregateError::Simplify {
+            node: input.node,
+            source,
+        })?
+        .mesh;
+    let handoff = Handoff::Expanded(Arc::new(ExpandedPart {
+        mesh: simplified.clone(),
+        material_keys,
+    }));
+    finish(input.node, simplified, handoff, stats)
+}
+
+/// Encodes the aggregate and fills in its counts.
+fn finish(
+    node: u32,
+    mesh: InstancedMesh,
+    handoff: Handoff,
+    mut stats: NodeStats,
+) -> Result<NodeOutput, AggregateError> {
+    let glb = export_glb(&mesh, &ExportOptions::plain()).map_err(|e| AggregateError::Glb {
+        node,
+        reason: e.to_string(),
+    })?;
+    stats.triangles_out = mesh.expanded_triangle_count();
+    stats.unique_triangles = mesh.unique_triangle_count();
+    stats.submeshes = mesh.submeshes.len();
+    stats.instances = mesh.instances.len();
+    stats.materials = mesh.materials.len();
+    stats.textures = mesh.textures.len();
+    stats.texture_bytes = mesh.textures.iter().map(|t| t.bytes.len()).sum();
+    stats.bytes = glb.len();
+    Ok(NodeOutput {
+        glb,
+        handoff,
+        stats,
+    })
+}
+
+/// For every model submesh any child drew, its version with the fewest triangles (ties:
+/// the first child's).
+fn coarsest_versions(children: &[Arc<Handoff>]) -> BTreeMap<PartKey, Arc<Submesh>> {
+    let mut out: BTreeMap<PartKey, Arc<Submesh>> = BTreeMap::new();
+    for child in children {
+        let Handoff::Versions(v) = child.as_ref() else {
+            continue;
+        };
+        for (key, sub) in v {
+            match out.get(key) {
+                Some(have) if have.indices.len() <= sub.indices.len() => {}
+                _ => {
+                    out.insert(*key, sub.clone());
+                }
+            }
+        }
+    }
+    out
+}
+
+/// The placements big enough to show, or the largest one if none is.
+fn cull(input: &NodeInput, options: &AggregateOptions) -> Vec<Placement> {
+    let kept: Vec<Placement> = input
+        .placements
+        .iter()
+        .filter(|p| input.display.object_pixels(p.centre, p.radius) >= options.cull_pixels)
+        .copied()
+        .collect();
+    if !kept.is_empty() || input.placements.is_empty() {
+        return kept;
+    }
+    let largest = input
+        .placements
+        .iter()
+        .max_by(|a, b| a.radius.total_cmp(&b.radius))
+        .copied();
+    largest.into_iter().collect()
+}
+
+/// Every distinct model of `ids`, loaded once.
+fn load_models(
+    ids: impl Iterator<Item = u64>,
+    models: &dyn ModelSource,
+) -> Result<BTreeMap<u64, Arc<SourceModel>>, AggregateError> {
+    let mut out = BTreeMap::new();
+    for id in ids {
+        if let std::collections::btree_map::Entry::Vacant(e) = out.entry(id) {
+            e.insert(models.model(id)?);
+        }
+    }
+    Ok(out)
+}
+
+/// The dedup plan for the kept placements (section 5.1).
+fn dedup_plan(
+    input: &NodeInput,
+    kept: &[Placement],
+    sources: &BTreeMap<u64, Arc<SourceModel>>,
+    table: &Table1,
+    options: &AggregateOptions,
+) -> BTreeMap<u64, crate::dedup::Replacement> {
+    let mut usage: BTreeMap<u64, (usize, f32)> = BTreeMap::new();
+    for p in kept {
+        let u = usage.entry(p.model).or_insert((0, 0.0));
+        u.0 += 1;
+        u.1 = u.1.max(p.radius);
+    }
+    let uses: Vec<ModelUse> = usage
+        .iter()
+        .map(|(&model, &(placements, radius))| {
+            let s = &sources[&model];
+            ModelUse {
+                model,
+                shape: &s.shape,
+                texture: &s.texture,
+                radius,
+                placements,
+                frame: s.frame.as_ref(),
+            }
+        })
+        .collect();
+    plan(&uses, dedup_distance(input.outer_radius, options), table)
+}
+
+/// Accumulates submeshes, materials and textures from several sources, sharing each source
+/// material and texture once.
+#[derive(Debug, Default)]
+struct Merger {
+    mesh: InstancedMesh,
+    materials: HashMap<(u64, usize), usize>,
+    textures: HashMap<(u64, usize), usize>,
+    material_keys: Vec<(u64, usize)>,
+}
+
+impl Merger {
+    /// Adds `sub` (a submesh of `source`, or a version of one) with its material; returns
+    /// its index.
+    fn submesh(&mut self, model: u64, source: &SourceModel, mut sub: Submesh) -> usize {
+        sub.material = sub
+            .material
+            .and_then(|m| self.material(model, m, &source.mesh));
+        self.mesh.submeshes.push(sub);
+        self.mesh.submeshes.len() - 1
+    }
+
+    /// The merged index of material `m` of `model`, adding it (and its texture) if new.
+    fn material(&mut self, model: u64, m: usize, from: &InstancedMesh) -> Option<usize> {
+        if let Some(&i) = self.materials.get(&(model, m)) {
+            return Some(i);
+        }
+        let mut material: Material = from.materials.get(m)?.clone();
+        if let Some(t) = material.base_color_texture.as_mut() {
+            let key = (model, t.texture);
+            let index = match self.textures.get(&key) {
+                Some(&i) => i,
+                None => {
+                    let texture = from.textures.get(t.texture)?.clone();
+                    self.mesh.textures.push(texture);
+                    self.textures.insert(key, self.mesh.textures.len() - 1);
+                    self.mesh.textures.len() - 1
+                }
+            };
+            t.texture = index;
+        }
+        self.mesh.materials.push(material);
+        self.material_keys.push((model, m));
+        let i = self.mesh.materials.len() - 1;
+        self.materials.insert((model, m), i);
+        Some(i)
+    }
+
+    /// Appends a child's expanded baseline mesh, sharing materials by source.
+    fn expanded(&mut self, part: &ExpandedPart) {
+        let base = self.mesh.submeshes.len();
+        for sub in &part.mesh.submeshes {
+            let mut sub = sub.clone();
+            sub.material = sub.material.and_then(|m| {
+                let (model, source_m) = *part.material_keys.get(m)?;
+                self.material_with_local(model, source_m, m, &part.mesh)
+            });
+            self.mesh.submeshes.push(sub);
+        }
+        for inst in &part.mesh.instances {
+            self.mesh.instances.push(Instance {
+                submesh: base + inst.submesh,
+                transform: inst.transform,
+            });
+        }
+    }
+
+    /// Like [`Merger::material`] for a material already copied into `from` as `local`.
+    fn material_with_local(
+        &mut self,
+        model: u64,
+        source_m: usize,
+        local: usize,
+        from: &InstancedMesh,
+    ) -> Option<usize> {
+        if let Some(&i) = self.materials.get(&(model, source_m)) {
+            return Some(i);
+        }
+        let mut material = from.materials.get(local)?.clone();
+        if let Some(t) = material.base_color_texture.as_mut() {
+            // Textures of an expanded part are keyed by (model, material) of their first user.
+            let key = (model, usize::MAX - source_m);
+            let index = match self.textures.get(&key) {
+                Some(&i) => i,
+                None => {
+                    let texture = from.textures.get(t.texture)?.clone();
+                    self.mesh.textures.push(texture);
+                    self.textures.insert(key, self.mesh.textures.len() - 1);
+                    self.mesh.textures.len() - 1
+                }
+            };
+            t.texture = index;
+        }
+        self.mesh.materials.push(material);
+        self.material_keys.push((model, source_m));
+        let i = self.mesh.materials.len() - 1;
+        self.materials.insert((model, source_m), i);
+        Some(i)
+    }
+}

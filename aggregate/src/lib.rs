@@ -1,0 +1,40 @@
+//! The offline aggregate rebuild (Azim et al. 2014, sections 5 to 7; `DESIGN.md`, "Data
+//! flow"): every BVH node gets one aggregate, an instanced mesh of everything below it,
+//! deduplicated, simplified by IAS to a budget from its on-screen size, and atlased to one
+//! material and one texture.
+//!
+//! # Layout
+//! - `build.rs`: [`build_aggregates`], the bottom-up, level-parallel rebuild with keys and
+//!   dirty tracking; [`BuildOptions`], [`BuildReport`].
+//! - `generate.rs`: [`generate`], one node's pipeline: gather, cull, dedup, merge, IAS, atlas,
+//!   encode; [`Handoff`], what a node hands its parent.
+//! - `dedup.rs`: Table 1 dedup with PCA alignment (section 5.1).
+//! - `pca.rs`: principal frames and sign-flip alignment.
+//! - `budget.rs`: the display model behind every budget (triangles, texels, culling).
+//! - `store.rs`: [`AggregateStore`], content-addressed files, journal and manifest, atomic
+//!   writes.
+//! - `source.rs`: [`ModelSource`], where models come from.
+//! - `options.rs`: [`AggregateOptions`], [`AtlasPolicy`], [`Method`].
+
+pub mod budget;
+mod build;
+pub mod dedup;
+mod error;
+mod generate;
+pub mod options;
+pub mod pca;
+mod source;
+pub mod store;
+
+pub use build::{
+    build_aggregates, levels, node_keys, resolve_atlas, BuildOptions, BuildReport, Progress,
+    AUTO_ATLAS_BYTES, AUTO_ATLAS_TEXTURES,
+};
+pub use error::AggregateError;
+pub use generate::{generate, ExpandedPart, Handoff, NodeInput, NodeOutput, NodeStats, Placement};
+pub use options::{AggregateOptions, AtlasPolicy, Method};
+pub use source::{InMemoryModels, ModelSource, SourceModel};
+pub use store::{AggregateEntry, AggregateManifest, AggregateStore};
+
+/// Version of the aggregate format written by this build; part of every key.
+pub const FORMAT: u32 = 1;

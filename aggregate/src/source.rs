@@ -1,0 +1,111 @@
+//! The models an aggregate is made of, as the rebuild sees them.
+
+use std::sync::Arc;
+
+use glam::Affine3A;
+use horizon_mesh::InstancedMesh;
+
+use crate::error::AggregateError;
+use crate::pca::PcaFrame;
+
+/// One unique model of the world, loaded and prepared once.
+#[derive(Debug)]
+pub struct SourceModel {
+    /// Its content hash in the model store.
+    pub hash: String,
+    /// The model.
+    pub mesh: InstancedMesh,
+    /// 3D Zernike descriptor (121 values).
+    pub shape: Vec<f32>,
+    /// Color Structure Descriptor (32 bins).
+    pub texture: Vec<f32>,
+    /// Principal frame, `None` when the model has no area.
+    pub frame: Option<PcaFrame>,
+    /// For each submesh, the transforms of its instances inside the model.
+    pub placements: Vec<Vec<Affine3A>>,
+}
+
+impl SourceModel {
+    /// Prepares a model: its principal frame and per-submesh placements.
+    pub fn new(hash: String, mesh: InstancedMesh, shape: Vec<f32>, texture: Vec<f32>) -> Self {
+        let frame = PcaFrame::of(&mesh);
+        let placements = mesh
+            .instances_by_submesh()
+            .into_iter()
+            .map(|ks| {
+                ks.into_iter()
+                    .map(|k| mesh.instances[k].transform)
+                    .collect()
+            })
+            .collect();
+        Self {
+            hash,
+            mesh,
+            shape,
+            texture,
+            frame,
+            placements,
+        }
+    }
+}
+
+/// Where the rebuild gets models from, by the BVH's model number.
+pub trait ModelSource: Sync {
+    /// The model numbered `model`.
+    fn model(&self, model: u64) -> Result<Arc<SourceModel>, AggregateError>;
+    /// The number of a model by content hash, if the world has it.
+    fn by_hash(&self, hash: &str) -> Option<u64>;
+}
+
+/// A [`ModelSource`] holding every model in memory.
+#[derive(Debug, Default)]
+pub struct InMemoryModels {
+    models: Vec<Arc<SourceModel>>,
+    index: std::collections::HashMap<String, u64>,
+}
+
+impl InMemoryModels {
+    /// The models numbered by their position in `models`.
+    pub fn new(models: Vec<SourceModel>) -> Self {
+        let index = models
+            .iter()
+            .enumerate()
+            .map(|(i, m)| (m.hash.clone(), i as u64))
+            .collect();
+        Self {
+            models: models.into_iter().map(Arc::new).collect(),
+            index,
+        }
+    }
+
+    /// Number of textures and their encoded bytes over every model (for the atlas rule).
+    pub fn texture_totals(&self) -> (usize, u64) {
+        self.models.iter().fold((0, 0), |(n, b), m| {
+            (
+                n + m.mesh.textures.len(),
+                b + m
+                    .mesh
+                    .textures
+                    .iter()
+                    .map(|t| t.bytes.len() as u64)
+                    .sum::<u64>(),
+            )
+        })
+    }
+}
+
+impl ModelSource for InMemoryModels {
+    fn model(&self, model: u64) -> Result<Arc<SourceModel>, AggregateError> {
+        self.models
+            .get(model as usize)
+            .cloned()
+            .ok_or_else(|| AggregateError::Model {
+                model,
+                reason: format!("no such model (the world has {})", self.models.len()),
+            })
+    }
+
+    fn by_hash(&self, hash: &str) -> Option<u64> {
+        self.index.get(hash).copied()
+    }
+}

@@ -1,0 +1,329 @@
+//! The aggregate store inside a world directory (issue 6, "World directory").
+//!
+//! ```text
+//! DIR/aggregates/<hash>.glb         every aggregate, named by the hash of its bytes
+//! DIR/aggregates/parts/<hash>.glb   what a node hands its parent (model versions)
+//! DIR/aggregates/journal.jsonl      one line per aggregate ever built: its key and entry
+//! DIR/aggregates/manifest.json      the current aggregate of every node of the tree
+//! ```
+//!
+//! Files are immutable and content-addressed; a changed aggregate gets a new name. Every
+//! file is written atomically (temporary file, fsync, rename, fsync of the folder), and the
+//! manifest is written last, so a crash mid-build leaves the previous manifest valid and
+//! naming files that all exist. The journal lets the next build reuse what a crashed one
+//! finished: a torn last line is ignored.
+
+use std::collections::{BTreeMap, HashMap};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::Mutex;
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::AggregateError;
+use crate::generate::NodeStats;
+use crate::options::AggregateOptions;
+
+/// Where each submesh of a parts file came from: (model content hash, submesh index).
+pub type PartList = Vec<(String, u32)>;
+
+/// One node's aggregate, as the manifest and the journal record it.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct AggregateEntry {
+    /// Hash of everything the aggregate was made from (`build.rs`, "keys").
+    pub key: String,
+    /// Content hash of the GLB: `aggregates/<glb>.glb`.
+    pub glb: String,
+    /// Content hash of the handoff parts, `aggregates/parts/<parts>.glb`, if any.
+    pub parts: Option<String>,
+    /// For each submesh of the parts file: the model's content hash and submesh index.
+    pub part_keys: PartList,
+    /// What building it did.
+    pub stats: NodeStats,
+}
+
+/// `aggregates/manifest.json`.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct AggregateManifest {
+    /// [`crate::FORMAT`].
+    pub format: u32,
+    /// The options every aggregate was built with.
+    pub options: AggregateOptions,
+    /// Whether aggregates were atlased.
+    pub atlas: bool,
+    /// Key of the root's aggregate (identifies the whole build).
+    pub root_key: String,
+    /// Per node number, its aggregate.
+    pub nodes: BTreeMap<u32, AggregateEntry>,
+}
+
+/// Paths and writes of one aggregate store.
+#[derive(Debug)]
+pub struct AggregateStore {
+    root: PathBuf,
+    journal: Mutex<Option<std::fs::File>>,
+}
+
+impl AggregateStore {
+    /// The store in folder `root` (created on first write).
+    pub fn new(root: &Path) -> Self {
+        Self {
+            root: root.to_path_buf(),
+            journal: Mutex::new(None),
+        }
+    }
+
+    /// The folder.
+    pub fn root(&self) -> &Path {
+        &self.root
+    }
+
+    /// `<root>/<hash>.glb`.
+    pub fn glb(&self, hash: &str) -> PathBuf {
+        self.root.join(format!("{hash}.glb"))
+    }
+
+    /// `<root>/parts/<hash>.glb`.
+    pub fn parts(&self, hash: &str) -> PathBuf {
+        self.root.join("parts").join(format!("{hash}.glb"))
+    }
+
+    /// `<root>/manifest.json`.
+    pub fn manifest_path(&self) -> PathBuf {
+        self.root.join("manifest.json")
+    }
+
+    /// `<root>/journal.jsonl`.
+    pub fn journal_path(&self) -> PathBuf {
+        self.root.join("journal.jsonl")
+    }
+
+    /// The current manifest, if a build ever completed.
+    pub fn manifest(&self) -> Result<Option<AggregateManifest>, AggregateError> {
+        let path = self.manifest_path();
+        let bytes = match std::fs::read(&path) {
+            Ok(b) => b,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+            Err(e) => return Err(AggregateError::io(path, e)),
+        };
+        serde_json::from_slice(&bytes)
+            .map(Some)
+            .map_err(|e| AggregateError::Corrupt {
+                path,
+                reason: e.to_string(),
+            })
+    }
+
+    /// Every aggregate this store knows by key: the manifest's, then the journal's (later
+    /// lines win), keeping only those whose files exist.
+    pub fn known(&self) -> Result<HashMap<String, AggregateEntry>, AggregateError> {
+        let mut out = HashMap::new();
+        if let Some(m) = self.manifest()? {
+            for e in m.nodes.into_values() {
+                out.insert(e.key.clone(), e);
+            }
+        }
+        let path = self.journal_path();
+        match std::fs::read_to_string(&path) {
+            Ok(text) => {
+                for line in text.lines() {
+                    // A crash can tear the last line; anything unparsable is skipped.
+                    if let Ok(e) = serde_json::from_str::<AggregateEntry>(line) {
+                        out.insert(e.key.clone(), e);
+                    }
+                }
+            }
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+            Err(e) => return Err(AggregateError::io(path, e)),
+        }
+        out.retain(|_, e| {
+            self.glb(&e.glb).exists() && e.parts.as_ref().is_none_or(|p| self.parts(p).exists())
+        });
+        Ok(out)
+    }
+
+    /// Stores an aggregate's GLB and parts, then journals its entry.
+    pub fn put(
+        &self,
+        key: String,
+        glb: &[u8],
+        parts: Option<(&[u8], PartList)>,
+        stats: NodeStats,
+    ) -> Result<AggregateEntry, AggregateError> {
+        let glb_hash = content_hash(glb);
+        write_if_absent(&self.glb(&glb_hash), glb)?;
+        let (parts_hash, part_keys) = match parts {
+            Some((bytes, keys)) => {
+                let h = content_hash(bytes);
+                write_if_absent(&self.parts(&h), bytes)?;
+                (Some(h), keys)
+            }
+            None => (None, Vec::new()),
+        };
+        let entry = AggregateEntry {
+            key,
+            glb: glb_hash,
+            parts: parts_hash,
+            part_keys,
+            stats,
+        };
+        self.journal(&entry)?;
+        Ok(entry)
+    }
+
+    /// Appends one entry to the journal and flushes it.
+    fn journal(&self, entry: &AggregateEntry) -> Result<(), AggregateError> {
+        let path = self.journal_path();
+        let mut line = serde_json::to_vec(entry).map_err(|e| AggregateError::Corrupt {
+            path: path.clone(),
+            reason: e.to_string(),
+        })?;
+        line.push(b'\n');
+        let mut guard = self
+            .journal
+            .lock()
+            .map_err(|_| AggregateError::Tree("journal lock poisoned".into()))?;
+        if guard.is_none() {
+            std::fs::create_dir_all(&self.root).map_err(|e| AggregateError::io(&self.root, e))?;
+            let file = std::fs::OpenOptions::new()
+                .create(true)
+                .append(true)
+                .open(&path)
+                .map_err(|e| AggregateError::io(&path, e))?;
+            *guard = Some(file);
+        }
+        if let Some(file) = guard.as_mut() {
+            file.write_all(&line)
+                .map_err(|e| AggregateError::io(&path, e))?;
+        }
+        Ok(())
+    }
+
+    /// Replaces the manifest atomically.
+    pub fn write_manifest(&self, manifest: &AggregateManifest) -> Result<(), AggregateError> {
+        let path = self.manifest_path();
+        let bytes = serde_json::to_vec(manifest).map_err(|e| AggregateError::Corrupt {
+            path: path.clone(),
+            reason: e.to_string(),
+        })?;
+        write_atomically(&path, &bytes)
+    }
+}
+
+/// Writes `bytes` to `path` unless a file is already there (content-addressed files never
+/// change).
+fn write_if_absent(path: &Path, bytes: &[u8]) -> Result<(), AggregateError> {
+    if path.exists() {
+        return Ok(());
+    }
+    write_atomically(path, bytes)
+}
+
+/// Writes `bytes` to `path` so that a reader (or a crash) sees the old file or the whole new
+/// one: a uniquely named temporary file in the same folder, fsync, rename, fsync the folder.
+pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), AggregateError> {
+    static COUNTER: AtomicU64 = AtomicU64::new(0);
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    std::fs::create_dir_all(&dir).map_err(|e| AggregateError::io(&dir, e))?;
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let tmp = dir.join(format!(
+        ".{name}.{}.{}.tmp",
+        std::process::id(),
+        COUNTER.fetch_add(1, Ordering::Relaxed)
+    ));
+    let result = (|| {
+        let mut file = std::fs::File::create(&tmp)?;
+        file.write_all(bytes)?;
+        file.sync_all()?;
+        std::fs::rename(&tmp, path)?;
+        // The rename is durable once the folder is synced (not supported everywhere).
+        if let Ok(d) = std::fs::File::open(&dir) {
+            let _ = d.sync_all();
+        }
+        Ok(())
+    })();
+    result.map_err(|e| {
+        let _ = std::fs::remove_file(&tmp);
+        AggregateError::io(path, e)
+    })
+}
+
+/// The FNV-1a 128-bit hash of `bytes` as 32 hex digits: a stable, dependency-free content
+/// address. It guards against accidental collisions only; a store of untrusted uploads would
+/// want a cryptographic hash.
+pub fn content_hash(bytes: &[u8]) -> String {
+    let mut h = KeyHasher::new();
+    h.write(bytes);
+    h.finish_hex()
+}
+
+/// Streaming FNV-1a 128, for keys built from many pieces.
+#[derive(Clone, Debug)]
+pub struct KeyHasher(u128);
+
+impl KeyHasher {
+    const OFFSET: u128 = 0x6c62_272e_07bb_0142_62b8_2175_6295_c58d;
+    const PRIME: u128 = 0x0000_0000_0100_0000_0000_0000_0000_013b;
+
+    /// A fresh hasher.
+    pub fn new() -> Self {
+        Self(Self::OFFSET)
+    }
+
+    /// Feeds bytes.
+    pub fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.0 ^= u128::from(b);
+            self.0 = self.0.wrapping_mul(Self::PRIME);
+        }
+    }
+
+    /// The hash as 32 hex digits.
+    pub fn finish_hex(&self) -> String {
+        format!("{:032x}", self.0)
+    }
+}
+
+impl Default for KeyHasher {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn fnv1a_128_matches_reference_values() {
+        // Reference values of FNV-1a 128 (IETF draft-eastlake-fnv test vectors).
+        assert_eq!(content_hash(b""), "6c62272e07bb014262b821756295c58d");
+        assert_eq!(content_hash(b"a"), "d228cb696f1a8caf78912b704e4a8964");
+    }
+
+    #[test]
+    fn a_torn_journal_line_is_ignored() {
+        let dir = std::env::temp_dir().join(format!("horizon-store-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let store = AggregateStore::new(&dir);
+        let e = store
+            .put("k1".into(), b"glb bytes", None, NodeStats::default())
+            .expect("put");
+        std::fs::OpenOptions::new()
+            .append(true)
+            .open(store.journal_path())
+            .and_then(|mut f| f.write_all(b"{\"key\":\"k2\",\"gl"))
+            .expect("tear");
+        let known = store.known().expect("known");
+        assert_eq!(known.len(), 1);
+        assert_eq!(known["k1"], e);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}

@@ -1,0 +1,347 @@
+//! The offline rebuild on a small world whose right answers are obvious: a grid of boxes
+//! (two byte-different uploads of the same textured box) and spikes.
+
+use std::collections::BTreeSet;
+use std::path::PathBuf;
+
+use glam::{Affine3A, Vec2, Vec3, Vec4};
+use horizon_aggregate::{
+    build_aggregates, AggregateError, AggregateOptions, AggregateStore, BuildOptions,
+    InMemoryModels, SourceModel,
+};
+use horizon_bvh::{Bvh, BvhOptions, NewObject, Sphere};
+use horizon_descriptors::{describe, DescriptorOptions};
+use horizon_mesh::{
+    import_bytes, Format, ImportOptions, Instance, InstancedMesh, Material, Submesh, Texture,
+    TextureRef, Wrap,
+};
+
+/// A unit box with UVs and a 4x4 checker texture.
+fn textured_box() -> InstancedMesh {
+    let mut positions = Vec::new();
+    let mut uvs = Vec::new();
+    let mut indices = Vec::new();
+    for axis in 0..3 {
+        for sign in [-1.0f32, 1.0] {
+            let n = Vec3::from_array({
+                let mut a = [0.0; 3];
+                a[axis] = sign;
+                a
+            });
+            let u = Vec3::from_array({
+                let mut a = [0.0; 3];
+                a[(axis + 1) % 3] = 1.0;
+                a
+            });
+            let v = n.cross(u);
+            let base = positions.len() as u32;
+            for (du, dv) in [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)] {
+                positions.push((n + u * du + v * dv) * 0.5);
+                uvs.push(Vec2::new((du + 1.0) * 0.5, (dv + 1.0) * 0.5));
+            }
+            indices.extend([base, base + 1, base + 2, base, base + 2, base + 3]);
+        }
+    }
+    let mut img = image::RgbaImage::new(4, 4);
+    for (x, y, p) in img.enumerate_pixels_mut() {
+        *p = if (x + y) % 2 == 0 {
+            image::Rgba([200, 40, 40, 255])
+        } else {
+            image::Rgba([240, 240, 240, 255])
+        };
+    }
+    let mut png = Vec::new();
+    img.write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
+        .expect("encode png");
+    InstancedMesh {
+        submeshes: vec![Submesh {
+            positions,
+            uvs: Some(uvs),
+            indices,
+            material: Some(0),
+            ..Submesh::default()
+        }],
+        instances: vec![Instance {
+            submesh: 0,
+            transform: Affine3A::IDENTITY,
+        }],
+        materials: vec![Material {
+            base_color_texture: Some(TextureRef {
+                texture: 0,
+                transform: None,
+            }),
+            ..Material::default()
+        }],
+        textures: vec![Texture {
+            bytes: png,
+            mime_type: "image/png".into(),
+            size: (4, 4),
+            wrap_u: Wrap::Repeat,
+            wrap_v: Wrap::Repeat,
+        }],
+    }
+}
+
+/// A tall blue four-sided spike: clearly not a box.
+fn spike() -> InstancedMesh {
+    let positions = vec![
+        Vec3::new(-0.3, 0.0, -0.3),
+        Vec3::new(0.3, 0.0, -0.3),
+        Vec3::new(0.3, 0.0, 0.3),
+        Vec3::new(-0.3, 0.0, 0.3),
+        Vec3::new(0.0, 3.0, 0.0),
+    ];
+    let indices = vec![0, 1, 2, 0, 2, 3, 0, 4, 1, 1, 4, 2, 2, 4, 3, 3, 4, 0];
+    InstancedMesh {
+        submeshes: vec![Submesh {
+            positions,
+            indices,
+            material: Some(0),
+            ..Submesh::default()
+        }],
+        instances: vec![Instance {
+            submesh: 0,
+            transform: Affine3A::IDENTITY,
+        }],
+        materials: vec![Material {
+            base_color_factor: Vec4::new(0.1, 0.2, 0.9, 1.0),
+            ..Material::default()
+        }],
+        textures: Vec::new(),
+    }
+}
+
+struct World {
+    models: InMemoryModels,
+    /// Per object: model number and transform.
+    objects: Vec<(u64, Affine3A)>,
+    radii: Vec<f32>,
+}
+
+/// Models 0 and 1 are the same box (two uploads), model 2 a spike; 48 objects on a grid.
+fn world() -> World {
+    let options = DescriptorOptions::default();
+    let meshes = [textured_box(), textured_box(), spike()];
+    let models: Vec<SourceModel> = meshes
+        .iter()
+        .enumerate()
+        .map(|(i, m)| {
+            let d = describe(m, &options).expect("describe").descriptors;
+            SourceModel::new(format!("model{i}"), m.clone(), d.zernike, d.csd)
+        })
+        .collect();
+    let radii = meshes
+        .iter()
+        .map(|m| {
+            let b = m.bounds();
+            (b.max - b.min).length() * 0.5
+        })
+        .collect();
+    let mut objects = Vec::new();
+    for k in 0..48u32 {
+        let model = u64::from(k % 3);
+        let t =
+            Affine3A::from_translation(Vec3::new((k % 8) as f32 * 3.0, 0.0, (k / 8) as f32 * 3.0));
+        objects.push((model, t));
+    }
+    World {
+        models: InMemoryModels::new(models),
+        objects,
+        radii,
+    }
+}
+
+fn new_object<'a>(w: &'a World, model: u64, t: Affine3A) -> NewObject<'a> {
+    let m = horizon_aggregate::ModelSource::model(&w.models, model).expect("model");
+    let b = m.mesh.bounds();
+    // Descriptors live in the source model; the BVH copies them.
+    let shape: &'a [f32] = &leaked_descriptors(&w.models, model).0;
+    let texture: &'a [f32] = &leaked_descriptors(&w.models, model).1;
+    NewObject {
+        model,
+        transform: t,
+        sphere: Sphere::new(
+            t.transform_point3((b.min + b.max) * 0.5),
+            w.radii[model as usize],
+        ),
+        shape,
+        texture,
+    }
+}
+
+/// The descriptors of a model, borrowed from the in-memory source.
+fn leaked_descriptors(models: &InMemoryModels, model: u64) -> &(Vec<f32>, Vec<f32>) {
+    // SourceModel is behind an Arc owned by `models`, so a leaked clone keeps the borrow
+    // simple in this test.
+    let m = horizon_aggregate::ModelSource::model(models, model).expect("model");
+    Box::leak(Box::new((m.shape.clone(), m.texture.clone())))
+}
+
+fn tree(w: &World) -> Bvh {
+    let objects: Vec<NewObject> = w
+        .objects
+        .iter()
+        .map(|&(m, t)| new_object(w, m, t))
+        .collect();
+    let bvh = Bvh::bulk_build(BvhOptions::with_branching(4), &objects).expect("bulk build");
+    bvh.validate().expect("valid tree");
+    bvh
+}
+
+fn temp(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("horizon-agg-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    dir
+}
+
+fn options(w: &World) -> BuildOptions {
+    BuildOptions {
+        aggregate: AggregateOptions::default(),
+        world_textures: w.models.texture_totals(),
+        stop_after: None,
+    }
+}
+
+#[test]
+fn every_node_gets_one_valid_single_texture_aggregate_and_the_build_is_deterministic() {
+    let w = world();
+    let bvh = tree(&w);
+    let (a, b) = (temp("det-a"), temp("det-b"));
+    let sa = AggregateStore::new(&a);
+    let sb = AggregateStore::new(&b);
+    let ra = build_aggregates(&bvh, &w.models, &sa, &options(&w), &|_| {}).expect("build a");
+    let rb = build_aggregates(&bvh, &w.models, &sb, &options(&w), &|_| {}).expect("build b");
+    assert!(ra.failed.is_empty(), "{:?}", ra.failed);
+    assert_eq!(ra.nodes, bvh.node_count());
+    assert_eq!(ra.built, ra.nodes);
+    let ma = sa.manifest().expect("read").expect("manifest");
+    let mb = sb.manifest().expect("read").expect("manifest");
+    assert_eq!(ma.nodes.len(), bvh.node_count());
+    for (node, e) in &ma.nodes {
+        assert_eq!(
+            mb.nodes[node].glb, e.glb,
+            "node {node} differs between two builds"
+        );
+        let bytes = std::fs::read(sa.glb(&e.glb)).expect("glb exists");
+        let mesh = import_bytes(&bytes, Format::Glb, None, &ImportOptions::default())
+            .expect("aggregate imports")
+            .mesh;
+        mesh.validate().expect("valid");
+        assert_eq!(mesh.materials.len(), 1, "node {node}");
+        assert_eq!(mesh.textures.len(), 1, "node {node}");
+        assert!(mesh.textures[0].bytes.len() <= 128 * 1024);
+        assert!(mesh.expanded_triangle_count() > 0);
+    }
+    assert_eq!(rb.built, ra.built);
+    let _ = std::fs::remove_dir_all(&a);
+    let _ = std::fs::remove_dir_all(&b);
+}
+
+#[test]
+fn exact_duplicates_merge_and_different_models_do_not() {
+    let w = world();
+    let bvh = tree(&w);
+    let dir = temp("dedup");
+    let store = AggregateStore::new(&dir);
+    build_aggregates(&bvh, &w.models, &store, &options(&w), &|_| {}).expect("build");
+    let m = store.manifest().expect("read").expect("manifest");
+    // The root holds all three models: the second box upload is replaced, the spike is not.
+    let root = &m.nodes[&bvh.root().0];
+    assert_eq!(root.stats.models, 3);
+    assert_eq!(root.stats.replaced, 1, "{:?}", root.stats);
+    // No aggregate ever replaces more than the duplicate box.
+    for (node, e) in &m.nodes {
+        assert!(e.stats.replaced <= 1, "node {node}: {:?}", e.stats);
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn a_crash_mid_build_keeps_the_old_manifest_and_the_next_build_completes() {
+    let w = world();
+    let mut bvh = tree(&w);
+    let dir = temp("crash");
+    let store = AggregateStore::new(&dir);
+    build_aggregates(&bvh, &w.models, &store, &options(&w), &|_| {}).expect("first build");
+    let before = store.manifest().expect("read").expect("manifest");
+
+    // Change the world, then crash after two aggregates.
+    for k in 0..6u32 {
+        let t = Affine3A::from_translation(Vec3::new(100.0 + k as f32 * 3.0, 0.0, 0.0));
+        bvh.insert(&new_object(&w, 2, t)).expect("insert");
+    }
+    let crash = BuildOptions {
+        stop_after: Some(2),
+        ..options(&w)
+    };
+    let err = build_aggregates(&bvh, &w.models, &store, &crash, &|_| {}).expect_err("crash");
+    assert!(matches!(err, AggregateError::Interrupted(2)), "{err}");
+    // The previous manifest is intact and every file it names exists.
+    let after = store.manifest().expect("read").expect("manifest");
+    assert_eq!(after.root_key, before.root_key);
+    for e in after.nodes.values() {
+        assert!(store.glb(&e.glb).exists());
+    }
+    // The next build completes, reusing what the crashed one finished.
+    let report = build_aggregates(&bvh, &w.models, &store, &options(&w), &|_| {}).expect("resume");
+    assert!(report.failed.is_empty());
+    assert_eq!(report.built + report.reused, bvh.node_count());
+    let done = store.manifest().expect("read").expect("manifest");
+    assert_eq!(done.nodes.len(), bvh.node_count());
+    assert_ne!(done.root_key, before.root_key);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn adding_objects_rebuilds_only_their_ancestors() {
+    let w = world();
+    let mut bvh = tree(&w);
+    let dir = temp("dirty");
+    let store = AggregateStore::new(&dir);
+    build_aggregates(&bvh, &w.models, &store, &options(&w), &|_| {}).expect("first build");
+    let before: BTreeSet<String> = store
+        .manifest()
+        .expect("read")
+        .expect("manifest")
+        .nodes
+        .values()
+        .map(|e| e.key.clone())
+        .collect();
+    let t = Affine3A::from_translation(Vec3::new(1.5, 0.0, 1.5));
+    let id = bvh.insert(&new_object(&w, 0, t)).expect("insert");
+    // The ancestors of the new object.
+    let mut ancestors = BTreeSet::new();
+    let mut at = bvh.object(id).map(|o| o.leaf());
+    while let Some(n) = at {
+        ancestors.insert(n.0);
+        at = bvh.node(n).and_then(|r| r.parent());
+    }
+    let report = build_aggregates(&bvh, &w.models, &store, &options(&w), &|_| {}).expect("rebuild");
+    let after = store.manifest().expect("read").expect("manifest");
+    let rebuilt: BTreeSet<u32> = after
+        .nodes
+        .iter()
+        .filter(|(_, e)| !before.contains(&e.key))
+        .map(|(&n, _)| n)
+        .collect();
+    assert_eq!(report.built, rebuilt.len());
+    // Every ancestor is rebuilt. Beyond them, only the siblings a split created or reshaped
+    // on the way up: children of ancestors, at most one per level.
+    assert!(
+        ancestors.is_subset(&rebuilt),
+        "{ancestors:?} vs {rebuilt:?}"
+    );
+    for &n in rebuilt.difference(&ancestors) {
+        let parent = bvh.node(horizon_bvh::NodeId(n)).and_then(|r| r.parent());
+        assert!(
+            parent.is_some_and(|p| ancestors.contains(&p.0)),
+            "node {n} is neither an ancestor nor a sibling of one"
+        );
+    }
+    assert!(
+        rebuilt.len() <= 2 * ancestors.len(),
+        "{ancestors:?} vs {rebuilt:?}"
+    );
+    assert!(report.built < bvh.node_count());
+    let _ = std::fs::remove_dir_all(&dir);
+}

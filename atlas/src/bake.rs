@@ -1,0 +1,279 @@
+//! Stage 3: bake. Each chart's box is resampled into its rectangle, multiplied by its material's
+//! base colour factor, and its gutter filled by extending the edge texels.
+//!
+//! Colour follows glTF 2.0 (section 3.9.2): the base colour texture is sRGB-encoded and the
+//! factor is linear, so texels are decoded to linear light (exact 256-entry table), filtered and
+//! multiplied there, and encoded back to sRGB with rounding. Alpha is linear throughout. An
+//! atlas texel centre at `(i + 0.5, j + 0.5)` inside its rectangle maps to the chart point
+//! `min + (i + 0.5, j + 0.5) * (box size / rect size)`, the inverse of the UV remapping; at scale
+//! 1 that is a source texel centre and bilinear sampling returns the texel unchanged.
+
+use std::sync::OnceLock;
+
+use glam::{DVec2, Vec4};
+use horizon_mesh::model::{AlphaMode, InstancedMesh, Wrap};
+use image::{Rgba, RgbaImage};
+
+use crate::chart::Chart;
+use crate::pack::Layout;
+use crate::AtlasError;
+
+/// Most bilinear samples per atlas texel and axis when a chart shrinks: a box filter over up to
+/// 8 x 8 source points, enough to average out noise at 1/8 scale while bounding the cost.
+const MAX_SUPERSAMPLE: f64 = 8.0;
+
+/// A decoded texture with the wrap modes it is sampled with.
+#[derive(Clone, Debug)]
+pub(crate) struct Source {
+    /// RGBA8, sRGB colour and linear alpha.
+    pub image: RgbaImage,
+    /// Wrap modes along U and V.
+    pub wrap: [Wrap; 2],
+}
+
+/// Decodes every texture referenced by a material that some submesh uses; the others stay
+/// `None`. A texture that decodes to no pixels also stays `None` and its materials fall back to
+/// flat patches.
+pub(crate) fn decode_sources(mesh: &InstancedMesh) -> Result<Vec<Option<Source>>, AtlasError> {
+    let mut used = vec![false; mesh.textures.len()];
+    for sub in &mesh.submeshes {
+        let tref = sub
+            .material
+            .and_then(|m| mesh.materials.get(m))
+            .and_then(|m| m.base_color_texture);
+        if let Some(t) = tref {
+            used[t.texture] = true;
+        }
+    }
+    let mut out = Vec::with_capacity(mesh.textures.len());
+    for (texture, (tex, used)) in mesh.textures.iter().zip(used).enumerate() {
+        if !used {
+            out.push(None);
+            continue;
+        }
+        let image = tex
+            .decode()
+            .map_err(|source| AtlasError::Decode { texture, source })?;
+        let nonempty = image.width() > 0 && image.height() > 0;
+        out.push(nonempty.then_some(Source {
+            image,
+            wrap: [tex.wrap_u, tex.wrap_v],
+        }));
+    }
+    Ok(out)
+}
+
+/// Bakes every chart into an atlas of the layout's size. Texels outside every padded rectangle
+/// stay transparent black. When `opaque`, every alpha is 255.
+pub(crate) fn bake_atlas(
+    charts: &[Chart],
+    layout: &Layout,
+    sources: &[Option<Source>],
+    opaque: bool,
+) -> RgbaImage {
+    let mut atlas = RgbaImage::new(layout.width, layout.height);
+    for (chart, rect) in charts.iter().zip(&layout.rects) {
+        let source = chart.texture.and_then(|t| sources.get(t)?.as_ref());
+        let step =
+            (chart.max - chart.min) / DVec2::new(f64::from(rect.width), f64::from(rect.height));
+        let samples = step.ceil().clamp(DVec2::ONE, DVec2::splat(MAX_SUPERSAMPLE));
+        let (kx, ky) = (samples.x as u32, samples.y as u32);
+        let weight = 1.0 / (kx * ky) as f32;
+        // Interior: resample, multiply, resolve alpha, encode.
+        for j in 0..rect.height {
+            for i in 0..rect.width {
+                let mut colour = Vec4::ZERO;
+                match source {
+                    Some(src) => {
+                        for b in 0..ky {
+                            for a in 0..kx {
+                                let sub = DVec2::new(
+                                    f64::from(i) + (f64::from(a) + 0.5) / f64::from(kx),
+                                    f64::from(j) + (f64::from(b) + 0.5) / f64::from(ky),
+                                );
+                                colour += sample_bilinear(src, chart.min + sub * step);
+                            }
+                        }
+                        if kx * ky > 1 {
+                            colour *= weight;
+                        }
+                    }
+                    None => colour = Vec4::ONE,
+                }
+                let px = encode_texel(colour * chart.factor, chart.alpha, opaque);
+                atlas.put_pixel(rect.x + i, rect.y + j, px);
+            }
+        }
+        // Gutter: each texel repeats the nearest interior texel.
+        let (x0, y0, x1, y1) = layout.padded(rect);
+        for y in y0..y1 {
+            for x in x0..x1 {
+                let inside = (rect.x..rect.x + rect.width).contains(&x)
+                    && (rect.y..rect.y + rect.height).contains(&y);
+                if !inside {
+                    let cx = x.clamp(rect.x, rect.x + rect.width - 1);
+                    let cy = y.clamp(rect.y, rect.y + rect.height - 1);
+                    let px = *atlas.get_pixel(cx, cy);
+                    atlas.put_pixel(x, y, px);
+                }
+            }
+        }
+    }
+    atlas
+}
+
+/// Linear RGBA to an sRGB texel, after the material's alpha mode: a mask becomes 0 or 1 against
+/// its own cut-off, an opaque material (or atlas) gets alpha 1.
+fn encode_texel(colour: Vec4, alpha: AlphaMode, opaque: bool) -> Rgba<u8> {
+    let a = match alpha {
+        _ if opaque => 1.0,
+        AlphaMode::Opaque => 1.0,
+        AlphaMode::Mask { cutoff } => {
+            if colour.w >= cutoff {
+                1.0
+            } else {
+                0.0
+            }
+        }
+        AlphaMode::Blend => colour.w,
+    };
+    Rgba([
+        linear_to_srgb8(colour.x),
+        linear_to_srgb8(colour.y),
+        linear_to_srgb8(colour.z),
+        (a.clamp(0.0, 1.0) * 255.0).round() as u8,
+    ])
+}
+
+/// Bilinear sample of `src` at `p` in texel space (texel centres at `i + 0.5`), honouring the
+/// wrap modes; returns linear RGB and alpha.
+pub(crate) fn sample_bilinear(src: &Source, p: DVec2) -> Vec4 {
+    let (w, h) = src.image.dimensions();
+    let q = p - DVec2::splat(0.5);
+    let f = q.floor();
+    let t = (q - f).as_vec2();
+    let (x0, y0) = (f.x as i64, f.y as i64);
+    let xs = [
+        wrap_index(x0, w, src.wrap[0]),
+        wrap_index(x0 + 1, w, src.wrap[0]),
+    ];
+    let ys = [
+        wrap_index(y0, h, src.wrap[1]),
+        wrap_index(y0 + 1, h, src.wrap[1]),
+    ];
+    let texel = |x: u32, y: u32| texel_linear(src.image.get_pixel(x, y));
+    let top = texel(xs[0], ys[0]) * (1.0 - t.x) + texel(xs[1], ys[0]) * t.x;
+    let bottom = texel(xs[0], ys[1]) * (1.0 - t.x) + texel(xs[1], ys[1]) * t.x;
+    top * (1.0 - t.y) + bottom * t.y
+}
+
+/// The mean colour of a texture in linear light, for a textured material drawn without UVs.
+pub(crate) fn mean_linear(src: &Source) -> Vec4 {
+    let n = (src.image.width() as f64 * src.image.height() as f64).max(1.0);
+    let sum = src.image.pixels().fold(glam::DVec4::ZERO, |acc, px| {
+        acc + texel_linear(px).as_dvec4()
+    });
+    (sum / n).as_vec4()
+}
+
+/// Folds a texel index into `0..n` by a glTF wrap mode.
+fn wrap_index(i: i64, n: u32, wrap: Wrap) -> u32 {
+    let n = i64::from(n);
+    let folded = match wrap {
+        Wrap::Repeat => i.rem_euclid(n),
+        Wrap::MirroredRepeat => {
+            let m = i.rem_euclid(2 * n);
+            if m >= n {
+                2 * n - 1 - m
+            } else {
+                m
+            }
+        }
+        Wrap::ClampToEdge => i.clamp(0, n - 1),
+    };
+    folded as u32
+}
+
+/// One texel as linear RGB and alpha.
+fn texel_linear(px: &Rgba<u8>) -> Vec4 {
+    let lut = srgb_to_linear_table();
+    Vec4::new(
+        lut[px[0] as usize],
+        lut[px[1] as usize],
+        lut[px[2] as usize],
+        f32::from(px[3]) / 255.0,
+    )
+}
+
+/// sRGB 8-bit code to linear light (IEC 61966-2-1).
+fn srgb_to_linear_table() -> &'static [f32; 256] {
+    static TABLE: OnceLock<[f32; 256]> = OnceLock::new();
+    TABLE.get_or_init(|| {
+        std::array::from_fn(|v| {
+            let c = v as f64 / 255.0;
+            let l = if c <= 0.04045 {
+                c / 12.92
+            } else {
+                ((c + 0.055) / 1.055).powf(2.4)
+            };
+            l as f32
+        })
+    })
+}
+
+/// Linear light to the nearest sRGB 8-bit code.
+pub(crate) fn linear_to_srgb8(x: f32) -> u8 {
+    let x = f64::from(x.clamp(0.0, 1.0));
+    let c = if x <= 0.0031308 {
+        x * 12.92
+    } else {
+        1.055 * x.powf(1.0 / 2.4) - 0.055
+    };
+    (c * 255.0).round().clamp(0.0, 255.0) as u8
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn srgb_round_trip_is_exact() {
+        // Decoding then encoding must return every 8-bit code, or scale-1 charts would drift.
+        let lut = srgb_to_linear_table();
+        for v in 0..=255u8 {
+            assert_eq!(linear_to_srgb8(lut[v as usize]), v);
+        }
+    }
+
+    #[test]
+    fn wrap_modes_fold_indices() {
+        // Width 3: repeat cycles 0 1 2, mirror goes 0 1 2 2 1 0, clamp sticks to the edges.
+        let fold = |w| (-3..6).map(|i| wrap_index(i, 3, w)).collect::<Vec<_>>();
+        assert_eq!(fold(Wrap::Repeat), vec![0, 1, 2, 0, 1, 2, 0, 1, 2]);
+        assert_eq!(fold(Wrap::MirroredRepeat), vec![2, 1, 0, 0, 1, 2, 2, 1, 0]);
+        assert_eq!(fold(Wrap::ClampToEdge), vec![0, 0, 0, 0, 1, 2, 2, 2, 2]);
+    }
+
+    #[test]
+    fn texel_centres_sample_exactly() {
+        // At a texel centre the bilinear weights are 1 and 0, so the texel comes back.
+        let mut image = RgbaImage::new(2, 1);
+        image.put_pixel(0, 0, Rgba([10, 20, 30, 255]));
+        image.put_pixel(1, 0, Rgba([200, 100, 50, 128]));
+        let src = Source {
+            image,
+            wrap: [Wrap::Repeat; 2],
+        };
+        let c = sample_bilinear(&src, DVec2::new(1.5, 0.5));
+        assert_eq!(
+            encode_texel(c, AlphaMode::Blend, false),
+            Rgba([200, 100, 50, 128])
+        );
+        // Two texels to the right is the same texel again under Repeat.
+        let c = sample_bilinear(&src, DVec2::new(3.5, 0.5));
+        assert_eq!(
+            encode_texel(c, AlphaMode::Blend, false),
+            Rgba([200, 100, 50, 128])
+        );
+    }
+}

@@ -1,0 +1,110 @@
+//! Stage 5: encode under the byte budget (the paper's 128 KB per aggregate texture).
+//!
+//! A lossless PNG is kept whenever it fits, so flat patches and small atlases stay exact. An
+//! opaque atlas that does not fit becomes a JPEG at the highest quality of [`JPEG_QUALITIES`]
+//! that fits; an atlas whose alpha matters stays PNG. When nothing fits, the caller re-packs at
+//! [`next_side`].
+
+use image::codecs::jpeg::JpegEncoder;
+use image::codecs::png::{CompressionType, FilterType, PngEncoder};
+use image::{ExtendedColorType, ImageEncoder, RgbaImage};
+
+use crate::pack::Layout;
+use crate::AtlasError;
+
+/// JPEG qualities tried, best first. Below 30 blocking shows on every texture; the side shrinks
+/// instead.
+const JPEG_QUALITIES: [u8; 6] = [90, 80, 70, 60, 45, 30];
+
+/// Each retry shrinks the atlas side to this fraction: JPEG size is roughly proportional to the
+/// texel count, so a fifth off the side takes a third off the bytes.
+const SIDE_STEP: f64 = 0.8;
+
+/// An encoded atlas.
+#[derive(Clone, Debug)]
+pub(crate) struct Encoded {
+    /// The PNG or JPEG bytes.
+    pub bytes: Vec<u8>,
+    /// `image/png` or `image/jpeg`.
+    pub mime_type: &'static str,
+    /// The JPEG quality, for a JPEG.
+    pub jpeg_quality: Option<u8>,
+}
+
+/// The best encoding of `image` within `max_bytes`, or `None` when none fits at this size.
+pub(crate) fn encode_within(
+    image: &RgbaImage,
+    opaque: bool,
+    max_bytes: usize,
+) -> Result<Option<Encoded>, AtlasError> {
+    let png = encode_png(image, opaque)?;
+    if png.len() <= max_bytes {
+        return Ok(Some(Encoded {
+            bytes: png,
+            mime_type: "image/png",
+            jpeg_quality: None,
+        }));
+    }
+    if !opaque {
+        return Ok(None);
+    }
+    let rgb = rgb_bytes(image);
+    // Try the lowest quality first: when even that does not fit, shrink at once.
+    let mut best = None;
+    for &quality in JPEG_QUALITIES.iter().rev() {
+        let jpeg = encode_jpeg(&rgb, image.width(), image.height(), quality)?;
+        if jpeg.len() > max_bytes {
+            break;
+        }
+        best = Some(Encoded {
+            bytes: jpeg,
+            mime_type: "image/jpeg",
+            jpeg_quality: Some(quality),
+        });
+    }
+    Ok(best)
+}
+
+/// The side to re-pack at after `layout` did not fit the budget, or `None` at one texel.
+pub(crate) fn next_side(layout: &Layout) -> Option<u32> {
+    let side = layout.width.max(layout.height);
+    (side > 1).then(|| ((f64::from(side) * SIDE_STEP) as u32).max(1))
+}
+
+/// PNG, RGB when opaque (a quarter smaller) and RGBA otherwise.
+fn encode_png(image: &RgbaImage, opaque: bool) -> Result<Vec<u8>, AtlasError> {
+    let mut out = Vec::new();
+    let encoder =
+        PngEncoder::new_with_quality(&mut out, CompressionType::Best, FilterType::Adaptive);
+    let result = if opaque {
+        let rgb = rgb_bytes(image);
+        encoder.write_image(&rgb, image.width(), image.height(), ExtendedColorType::Rgb8)
+    } else {
+        encoder.write_image(
+            image.as_raw(),
+            image.width(),
+            image.height(),
+            ExtendedColorType::Rgba8,
+        )
+    };
+    result.map_err(AtlasError::Encode)?;
+    Ok(out)
+}
+
+/// Baseline JPEG of RGB bytes.
+fn encode_jpeg(rgb: &[u8], width: u32, height: u32, quality: u8) -> Result<Vec<u8>, AtlasError> {
+    let mut out = Vec::new();
+    JpegEncoder::new_with_quality(&mut out, quality)
+        .encode(rgb, width, height, ExtendedColorType::Rgb8)
+        .map_err(AtlasError::Encode)?;
+    Ok(out)
+}
+
+/// The RGB channels of an RGBA image.
+fn rgb_bytes(image: &RgbaImage) -> Vec<u8> {
+    image
+        .as_raw()
+        .chunks_exact(4)
+        .flat_map(|p| [p[0], p[1], p[2]])
+        .collect()
+}

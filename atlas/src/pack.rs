@@ -1,0 +1,289 @@
+//! Stage 2: scale and pack. The placement is the `crunch` crate's (a maximal-rectangles packer
+//! for sprite atlases, largest items first, best-area fit; see Jylänki, "A thousand ways to pack
+//! the bin"); this file only chooses the global texel scale and checks what the packer returned.
+
+use glam::DVec2;
+
+use crate::chart::Chart;
+use crate::AtlasError;
+
+/// Largest atlas side the packer is asked for: the common GPU texture limit.
+const PACKER_MAX_SIDE: u32 = 16384;
+
+/// Factor by which the texel scale shrinks after a failed packing: ten percent per try keeps the
+/// found scale within ten percent of the largest that packs, in a few dozen tries at most.
+const SCALE_STEP: f64 = 0.9;
+
+/// Bisections after the first scale that packs: four halve the gap three times over, leaving the
+/// scale within about one percent of the largest that packs.
+const REFINE_STEPS: usize = 4;
+
+/// Where the charts went. Each rectangle's content is `width x height` texels at `(x, y)`; the
+/// gutter surrounds it, so the padded rectangle is `(x - gutter, y - gutter)` of size
+/// `(width + 2 gutter, height + 2 gutter)`.
+///
+/// Invariants (checked by [`Layout::validate`]): every content rectangle is non-empty, every
+/// padded rectangle lies inside `width x height`, and no two padded rectangles overlap.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Layout {
+    /// Atlas width in texels: the packed extent, not the side the packer was given.
+    pub width: u32,
+    /// Atlas height in texels.
+    pub height: u32,
+    /// Texels of padding on each side of every rectangle.
+    pub gutter: u32,
+    /// One rectangle per input size, in input order.
+    pub rects: Vec<PackedRect>,
+}
+
+/// One chart's content rectangle in the atlas, gutter excluded.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct PackedRect {
+    /// Left edge in texels.
+    pub x: u32,
+    /// Top edge in texels.
+    pub y: u32,
+    /// Width in texels.
+    pub width: u32,
+    /// Height in texels.
+    pub height: u32,
+}
+
+/// A broken [`Layout`] invariant.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum LayoutError {
+    /// A rectangle has no area.
+    #[error("rectangle {0} is empty")]
+    Empty(usize),
+    /// A padded rectangle leaves the atlas.
+    #[error("rectangle {0} with its gutter leaves the atlas")]
+    Outside(usize),
+    /// Two padded rectangles share texels.
+    #[error("rectangles {0} and {1} overlap with their gutters")]
+    Overlap(usize, usize),
+}
+
+impl Layout {
+    /// Checks every invariant listed on the type.
+    pub fn validate(&self) -> Result<(), LayoutError> {
+        let g = u64::from(self.gutter);
+        // Padded rectangles as [x0, x1) x [y0, y1) in u64, so no sum overflows.
+        let mut padded = Vec::with_capacity(self.rects.len());
+        for (i, r) in self.rects.iter().enumerate() {
+            if r.width == 0 || r.height == 0 {
+                return Err(LayoutError::Empty(i));
+            }
+            let (x, y) = (u64::from(r.x), u64::from(r.y));
+            let (x1, y1) = (x + u64::from(r.width) + g, y + u64::from(r.height) + g);
+            if x < g || y < g || x1 > u64::from(self.width) || y1 > u64::from(self.height) {
+                return Err(LayoutError::Outside(i));
+            }
+            padded.push((x - g, x1, y - g, y1, i));
+        }
+        // Sweep along x: only rectangles starting before one ends can overlap it.
+        padded.sort_unstable();
+        for (k, a) in padded.iter().enumerate() {
+            for b in padded[k + 1..].iter().take_while(|b| b.0 < a.1) {
+                if b.2 < a.3 && a.2 < b.3 {
+                    return Err(LayoutError::Overlap(a.4.min(b.4), a.4.max(b.4)));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// The padded rectangle of `rect` as `(x0, y0, x1, y1)`, end-exclusive.
+    pub fn padded(&self, rect: &PackedRect) -> (u32, u32, u32, u32) {
+        let g = self.gutter;
+        (
+            rect.x - g,
+            rect.y - g,
+            rect.x + rect.width + g,
+            rect.y + rect.height + g,
+        )
+    }
+}
+
+/// Packs rectangles of the given `(width, height)` sizes, each with `gutter` texels around it,
+/// into a `max_side x max_side` square. `None` when they do not all fit, or a size is zero. The
+/// returned layout is cropped to the packed extent.
+pub fn pack_rects(sizes: &[(u32, u32)], gutter: u32, max_side: u32) -> Option<Layout> {
+    let side = max_side.min(PACKER_MAX_SIDE);
+    let mut items = Vec::with_capacity(sizes.len());
+    for (i, &(w, h)) in sizes.iter().enumerate() {
+        if w == 0 || h == 0 {
+            return None;
+        }
+        let pw = usize::try_from(u64::from(w) + 2 * u64::from(gutter)).ok()?;
+        let ph = usize::try_from(u64::from(h) + 2 * u64::from(gutter)).ok()?;
+        // No rotation: a rotated chart would need its UVs rotated too, for little gain.
+        items.push(crunch::Item::new(i, pw, ph, crunch::Rotation::None));
+    }
+    let square = crunch::Rect::of_size(side as usize, side as usize);
+    let packed = crunch::pack(square, items).ok()?;
+    let mut rects = vec![PackedRect::default(); sizes.len()];
+    let (mut width, mut height) = (0u32, 0u32);
+    for item in packed {
+        let r = item.rect;
+        let (x0, y0) = (u32::try_from(r.x).ok()?, u32::try_from(r.y).ok()?);
+        let (w, h) = *sizes.get(item.data)?;
+        rects[item.data] = PackedRect {
+            x: x0 + gutter,
+            y: y0 + gutter,
+            width: w,
+            height: h,
+        };
+        width = width.max(x0 + w + 2 * gutter);
+        height = height.max(y0 + h + 2 * gutter);
+    }
+    Some(Layout {
+        width,
+        height,
+        gutter,
+        rects,
+    })
+}
+
+/// Finds the largest global texel scale <= 1 at which every chart, `ceil(natural size x scale)`
+/// texels and at least one per axis, packs into `side x side`, then the smallest square that
+/// still holds them, and returns the validated layout with that scale.
+///
+/// The scale shrinks geometrically by [`SCALE_STEP`] until the charts pack, then
+/// [`REFINE_STEPS`] bisections between the last failure and the first success recover most of
+/// the step.
+pub(crate) fn pack_charts(
+    charts: &[Chart],
+    gutter: u32,
+    side: u32,
+) -> Result<(Layout, f32), AtlasError> {
+    let natural: Vec<DVec2> = charts.iter().map(Chart::natural).collect();
+    let sizes_at = |scale: f64| -> Vec<(u32, u32)> {
+        natural
+            .iter()
+            .map(|n| {
+                let s = (*n * scale).ceil().max(DVec2::ONE);
+                (
+                    s.x.min(f64::from(u32::MAX)) as u32,
+                    s.y.min(f64::from(u32::MAX)) as u32,
+                )
+            })
+            .collect()
+    };
+    // No packing beats area: above the scale whose chart area equals the square's, nothing fits.
+    let area: f64 = natural.iter().map(|n| n.x * n.y).sum();
+    let side_f = f64::from(side.min(PACKER_MAX_SIDE));
+    let mut scale = if area > 0.0 {
+        (side_f / area.sqrt()).min(1.0)
+    } else {
+        1.0
+    };
+    // Shrink geometrically until everything packs.
+    let mut failed_above = None;
+    let mut layout = loop {
+        let sizes = sizes_at(scale);
+        if let Some(layout) = pack_rects(&sizes, gutter, side) {
+            break layout;
+        }
+        if sizes.iter().all(|&s| s == (1, 1)) {
+            return Err(AtlasError::DoesNotFit {
+                charts: charts.len(),
+                side,
+            });
+        }
+        failed_above = Some(scale);
+        scale *= SCALE_STEP;
+    };
+    // Bisect (geometrically) between the packing scale and the failing one above it.
+    if let Some(mut hi) = failed_above {
+        for _ in 0..REFINE_STEPS {
+            let mid = (scale * hi).sqrt();
+            match pack_rects(&sizes_at(mid), gutter, side) {
+                Some(better) => {
+                    scale = mid;
+                    layout = better;
+                }
+                None => hi = mid,
+            }
+        }
+    }
+    // The packer spreads rectangles over the whole square it is given; find the smallest square
+    // that holds them at this scale, so the cropped atlas wastes little.
+    let sizes = sizes_at(scale);
+    let padded_area: u64 = sizes
+        .iter()
+        .map(|&(w, h)| {
+            (u64::from(w) + 2 * u64::from(gutter)) * (u64::from(h) + 2 * u64::from(gutter))
+        })
+        .sum();
+    let longest = sizes
+        .iter()
+        .map(|&(w, h)| w.max(h) + 2 * gutter)
+        .max()
+        .unwrap_or(0);
+    let mut lo = longest.max((padded_area as f64).sqrt().ceil() as u32);
+    let mut hi = layout.width.max(layout.height);
+    while lo < hi {
+        let mid = lo + (hi - lo) / 2;
+        match pack_rects(&sizes, gutter, mid) {
+            Some(tighter) => {
+                hi = mid;
+                layout = tighter;
+            }
+            None => lo = mid + 1,
+        }
+    }
+    layout.validate()?;
+    Ok((layout, scale as f32))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn two_squares_side_by_side() {
+        // Two 4x4 rectangles with a gutter of 1 are 6x6 each; a 12x6 strip holds both, and a
+        // 12x12 square is enough room.
+        let layout = pack_rects(&[(4, 4), (4, 4)], 1, 12).expect("two 6x6 fit in 12x12");
+        layout.validate().expect("valid layout");
+        assert_eq!(layout.rects.len(), 2);
+        assert!(layout.width * layout.height >= 72);
+    }
+
+    #[test]
+    fn too_big_does_not_fit() {
+        // A 10x10 rectangle with a gutter of 1 needs 12 texels per side.
+        assert!(pack_rects(&[(10, 10)], 1, 11).is_none());
+        assert!(pack_rects(&[(10, 10)], 1, 12).is_some());
+    }
+
+    #[test]
+    fn validate_catches_overlap_and_outside() {
+        let mut layout = Layout {
+            width: 10,
+            height: 10,
+            gutter: 1,
+            rects: vec![
+                PackedRect {
+                    x: 1,
+                    y: 1,
+                    width: 3,
+                    height: 3,
+                },
+                PackedRect {
+                    x: 5,
+                    y: 1,
+                    width: 3,
+                    height: 3,
+                },
+            ],
+        };
+        // Padded: [0,5) and [4,9) in x share column 4.
+        assert_eq!(layout.validate(), Err(LayoutError::Overlap(0, 1)));
+        layout.rects[1].x = 6;
+        assert_eq!(layout.validate(), Ok(()));
+        layout.rects[1].x = 7;
+        // [6, 11) leaves the 10-wide atlas.
+        assert_eq!(layout.validate(), Err(LayoutError::Outside(1)));
+    }
+}

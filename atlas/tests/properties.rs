@@ -1,0 +1,111 @@
+//! Property tests of the geometric promises: packed rectangles never overlap and stay inside
+//! the atlas; at texel scale 1 every texel a triangle covers survives atlasing unchanged.
+
+mod common;
+
+use common::*;
+use glam::{DVec2, Vec2, Vec3, Vec4};
+use horizon_atlas::{pack_rects, AtlasOptions};
+use horizon_mesh::model::{AlphaMode, Submesh, Wrap};
+use image::{Rgba, RgbaImage};
+use proptest::prelude::*;
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(128))]
+
+    #[test]
+    fn packed_rectangles_are_disjoint_and_inside(
+        sizes in prop::collection::vec((1u32..40, 1u32..40), 0..40),
+        gutter in 0u32..4,
+        side in 1u32..300,
+    ) {
+        if let Some(layout) = pack_rects(&sizes, gutter, side) {
+            prop_assert_eq!(layout.validate(), Ok(()));
+            prop_assert!(layout.width <= side && layout.height <= side);
+            prop_assert_eq!(layout.rects.len(), sizes.len());
+            for (r, &(w, h)) in layout.rects.iter().zip(&sizes) {
+                prop_assert_eq!((r.width, r.height), (w, h));
+            }
+        } else {
+            // Refusing is only honest when the padded area cannot fit, or is at least plausibly
+            // too tight: a generous square must always pack.
+            let g = u64::from(gutter);
+            let area: u64 = sizes.iter().map(|&(w, h)| (u64::from(w) + 2 * g) * (u64::from(h) + 2 * g)).sum();
+            let longest = sizes.iter().map(|&(w, h)| u64::from(w.max(h)) + 2 * g).max().unwrap_or(0);
+            prop_assert!(area * 2 > u64::from(side) * u64::from(side) || longest > u64::from(side) / 2);
+        }
+    }
+
+    #[test]
+    fn covered_texels_survive_at_scale_one(
+        (w, h) in (1u32..9, 1u32..9),
+        seed in any::<u64>(),
+        corners in prop::array::uniform3((-1.0f32..2.0, -1.0f32..2.0)),
+        mode in prop::sample::select(vec![Wrap::Repeat, Wrap::MirroredRepeat, Wrap::ClampToEdge]),
+    ) {
+        // One triangle with UVs in [-1, 2] (three tiles, under the four-tile cap) on a random
+        // opaque texture: the atlas stays at scale 1 and lossless (a small PNG), so the atlas
+        // texel under the remapped UV of every covered source texel centre is that texel,
+        // fetched with the texture's wrap mode. Exact equality is the honest tolerance: at scale
+        // 1 atlas texel centres are source texel centres and sRGB round trips exactly.
+        let tex = noise(w, h, seed, false);
+        let uvs: Vec<Vec2> = corners.iter().map(|&(u, v)| Vec2::new(u, v)).collect();
+        let sub = Submesh {
+            positions: vec![Vec3::ZERO, Vec3::X, Vec3::Y],
+            normals: None,
+            uvs: Some(uvs.clone()),
+            colors: None,
+            indices: vec![0, 1, 2],
+            material: Some(0),
+        };
+        let input = mesh(
+            vec![sub],
+            vec![material(Vec4::ONE, Some(0), AlphaMode::Opaque)],
+            vec![png_texture(&tex, mode)],
+        );
+        let (out, report, atlas) = atlased(&input, &AtlasOptions::default());
+        prop_assert_eq!(report.texel_scale, 1.0);
+        prop_assert_eq!(report.mime_type.as_str(), "image/png");
+        let atlas_uvs = out.submeshes[0].uvs.clone().expect("uvs");
+        for (x, y, want) in covered_texels(&tex, &uvs, mode) {
+            let p = DVec2::new(x as f64 + 0.5, y as f64 + 0.5) / DVec2::new(w as f64, h as f64);
+            let Some(b) = barycentric(&uvs, p) else { continue };
+            let uv = atlas_uvs[0] * b[0] as f32 + atlas_uvs[1] * b[1] as f32 + atlas_uvs[2] * b[2] as f32;
+            prop_assert_eq!(texel_at(&atlas, uv), want, "texel ({}, {})", x, y);
+        }
+    }
+}
+
+/// Source texel centres (as unwrapped integer texel coordinates) inside the UV triangle, with
+/// the texel the wrap mode fetches there.
+fn covered_texels(tex: &RgbaImage, uvs: &[Vec2], mode: Wrap) -> Vec<(i64, i64, Rgba<u8>)> {
+    let (w, h) = tex.dimensions();
+    let size = DVec2::new(w as f64, h as f64);
+    let pts: Vec<DVec2> = uvs.iter().map(|uv| uv.as_dvec2() * size).collect();
+    let lo = pts[0].min(pts[1]).min(pts[2]).floor();
+    let hi = pts[0].max(pts[1]).max(pts[2]).ceil();
+    let mut out = Vec::new();
+    for y in lo.y as i64..hi.y as i64 {
+        for x in lo.x as i64..hi.x as i64 {
+            let p = DVec2::new(x as f64 + 0.5, y as f64 + 0.5) / size;
+            if barycentric(uvs, p).is_some() {
+                out.push((x, y, *tex.get_pixel(wrap(x, w, mode), wrap(y, h, mode))));
+            }
+        }
+    }
+    out
+}
+
+/// Barycentric coordinates of `p` in the UV triangle, when it is inside (boundary included) and
+/// the triangle is not degenerate.
+fn barycentric(uvs: &[Vec2], p: DVec2) -> Option<[f64; 3]> {
+    let (a, b, c) = (uvs[0].as_dvec2(), uvs[1].as_dvec2(), uvs[2].as_dvec2());
+    let det = (b - a).perp_dot(c - a);
+    if det.abs() < 1e-12 {
+        return None;
+    }
+    let l1 = (p - a).perp_dot(c - a) / det;
+    let l2 = (b - a).perp_dot(p - a) / det;
+    let l0 = 1.0 - l1 - l2;
+    (l0 >= 0.0 && l1 >= 0.0 && l2 >= 0.0).then_some([l0, l1, l2])
+}

@@ -1,0 +1,408 @@
+//! `horizon build`'s aggregate stage and `horizon report` (issue 6): the offline rebuild of
+//! every node's aggregate into `DIR/aggregates/`, and the join download it buys a client.
+
+use std::collections::{BTreeSet, HashMap};
+use std::io::{IsTerminal, Write};
+use std::path::Path;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::time::Instant;
+
+use anyhow::Context;
+use glam::Vec3;
+use horizon_aggregate::{
+    build_aggregates, AggregateManifest, AggregateOptions, AggregateStore, AtlasPolicy,
+    BuildOptions, BuildReport, InMemoryModels, Progress, SourceModel,
+};
+use horizon_bvh::{Bvh, CutItem, CutQuery};
+use horizon_mesh::{import_file, ImportOptions};
+use rayon::prelude::*;
+use serde::Serialize;
+
+use crate::world_store::{DescriptorCache, WorldDir, WorldManifest};
+
+/// The aggregate knobs of `horizon build`.
+#[derive(Clone, Copy, Debug)]
+pub struct AggregateArgs {
+    /// See [`AggregateOptions::pixels_per_triangle`].
+    pub pixels_per_triangle: f64,
+    /// See [`AggregateOptions::min_solid_angle`].
+    pub min_solid_angle: f64,
+    /// When to atlas.
+    pub atlas: AtlasPolicy,
+}
+
+impl AggregateArgs {
+    /// The aggregate options these arguments ask for.
+    pub fn options(&self) -> AggregateOptions {
+        AggregateOptions {
+            pixels_per_triangle: self.pixels_per_triangle,
+            min_solid_angle: self.min_solid_angle,
+            atlas: self.atlas,
+            ..AggregateOptions::default()
+        }
+    }
+}
+
+/// `DIR/aggregates`.
+pub fn aggregate_store(dir: &Path) -> AggregateStore {
+    AggregateStore::new(&dir.join("aggregates"))
+}
+
+/// `DIR/baseline`: the unoptimised aggregates `horizon report` compares with.
+pub fn baseline_store(dir: &Path) -> AggregateStore {
+    AggregateStore::new(&dir.join("baseline"))
+}
+
+/// Every model of the world, imported and prepared, numbered as the BVH numbers them.
+pub fn load_models(
+    store: &WorldDir,
+    manifest: &WorldManifest,
+    cache: &DescriptorCache,
+) -> anyhow::Result<InMemoryModels> {
+    let models = manifest
+        .models
+        .par_iter()
+        .map(|m| -> anyhow::Result<SourceModel> {
+            let path = store.model(&m.hash);
+            let mesh = import_file(&path, &ImportOptions::default())
+                .with_context(|| format!("cannot load {}", path.display()))?
+                .mesh;
+            let d = cache
+                .models
+                .get(&m.hash)
+                .with_context(|| format!("model {} has no descriptors", m.hash))?;
+            Ok(SourceModel::new(
+                m.hash.clone(),
+                mesh,
+                d.zernike.clone(),
+                d.csd.clone(),
+            ))
+        })
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    Ok(InMemoryModels::new(models))
+}
+
+/// Builds every aggregate of `bvh` into `store`, with a progress bar on a terminal.
+pub fn build_into(
+    bvh: &Bvh,
+    models: &InMemoryModels,
+    store: &AggregateStore,
+    options: AggregateOptions,
+    what: &str,
+) -> anyhow::Result<BuildReport> {
+    let bar = ProgressBar::new(what);
+    let report = build_aggregates(
+        bvh,
+        models,
+        store,
+        &BuildOptions {
+            aggregate: options,
+            world_textures: models.texture_totals(),
+            stop_after: None,
+        },
+        &|p| bar.show(p),
+    )?;
+    bar.finish();
+    Ok(report)
+}
+
+/// A one-line progress bar on stderr, drawn only on a terminal and at most every 1%.
+struct ProgressBar {
+    what: String,
+    on: bool,
+    last: AtomicUsize,
+}
+
+impl ProgressBar {
+    fn new(what: &str) -> Self {
+        Self {
+            what: what.to_string(),
+            on: std::io::stderr().is_terminal(),
+            last: AtomicUsize::new(usize::MAX),
+        }
+    }
+
+    fn show(&self, p: Progress) {
+        if !self.on || p.total == 0 {
+            return;
+        }
+        let percent = p.done * 100 / p.total;
+        if self.last.swap(percent, Ordering::Relaxed) == percent {
+            return;
+        }
+        let filled = percent * 30 / 100;
+        let mut err = std::io::stderr().lock();
+        let _ = write!(
+            err,
+            "\rhorizon: {} [{}{}] {}/{} ({percent}%)",
+            self.what,
+            "#".repeat(filled),
+            "-".repeat(30 - filled),
+            p.done,
+            p.total
+        );
+        let _ = err.flush();
+    }
+
+    fn finish(&self) {
+        if self.on {
+            eprintln!();
+        }
+    }
+}
+
+/// `horizon report --json`.
+#[derive(Debug, Serialize)]
+pub struct Report {
+    /// Viewpoints.
+    pub views: usize,
+    /// The cut's minimum solid angle.
+    pub min_solid_angle: f32,
+    /// Mean unique bytes of every asset in a cut (models of objects, aggregate GLBs).
+    pub join_bytes_mean: f64,
+    /// Every unique model of the world: what a client without aggregates downloads.
+    pub naive_bytes: u64,
+    /// Mean join download through the unoptimised aggregates (no dedup, QEM on the expanded
+    /// merge, no atlas).
+    pub unoptimized_join_bytes_mean: f64,
+    /// `1 - join_bytes_mean / naive_bytes`.
+    pub reduction_vs_naive: f64,
+    /// `1 - join_bytes_mean / unoptimized_join_bytes_mean`.
+    pub reduction_vs_unoptimized: f64,
+    /// Mean draw calls per cut: one per submesh of every entry (instanced submeshes are one
+    /// call each).
+    pub draw_calls_mean: f64,
+    /// The same through the unoptimised aggregates.
+    pub unoptimized_draw_calls_mean: f64,
+    /// Mean textures per cut (unique).
+    pub textures_mean: f64,
+    /// The same through the unoptimised aggregates.
+    pub unoptimized_textures_mean: f64,
+    /// Mean entries per cut, and how many of them are aggregates.
+    pub entries_mean: f64,
+    /// Mean aggregate entries per cut.
+    pub aggregates_mean: f64,
+    /// Per view: join bytes, unoptimised join bytes.
+    pub per_view: Vec<(f64, f64)>,
+    /// Seconds to build the unoptimised baseline (0 when reused).
+    pub baseline_seconds: f64,
+}
+
+/// Per asset: bytes, draw calls and textures.
+#[derive(Clone, Copy, Debug, Default)]
+struct Asset {
+    bytes: u64,
+    draws: u64,
+    textures: u64,
+}
+
+/// `horizon report DIR --views V --seed S [--min-solid-angle A] [--json]`.
+pub fn report(
+    dir: &Path,
+    views: usize,
+    seed: u64,
+    min_solid_angle: f32,
+    max_results: usize,
+    json: bool,
+) -> anyhow::Result<()> {
+    if views == 0 {
+        anyhow::bail!("--views must be at least 1");
+    }
+    if !(min_solid_angle.is_finite() && min_solid_angle > 0.0) {
+        anyhow::bail!("--min-solid-angle {min_solid_angle} must be a positive number");
+    }
+    let world = WorldDir::new(dir);
+    let (manifest, _objects) = world.load()?;
+    let bvh: Bvh = WorldDir::read_json(&world.bvh())
+        .with_context(|| format!("no built world in {} (run horizon build)", dir.display()))?;
+    let ours = aggregate_store(dir)
+        .manifest()?
+        .with_context(|| format!("no aggregates in {} (run horizon build)", dir.display()))?;
+    // The unoptimised baseline, built once with the same display model and cached.
+    let t = Instant::now();
+    let baseline_options = ours.options.unoptimized();
+    let base_store = baseline_store(dir);
+    let cache: DescriptorCache = WorldDir::read_json(&world.descriptors())?;
+    let models = load_models(&world, &manifest, &cache)?;
+    let base_report = build_into(&bvh, &models, &base_store, baseline_options, "baseline")?;
+    let baseline_seconds = if base_report.built > 0 {
+        t.elapsed().as_secs_f64()
+    } else {
+        0.0
+    };
+    let base = base_store
+        .manifest()?
+        .context("baseline build wrote no manifest")?;
+    drop(models);
+
+    // Assets: models by BVH number, aggregates by node.
+    let model_assets: Vec<Asset> = manifest
+        .models
+        .iter()
+        .map(|m| model_asset(&world, &m.hash, m.bytes))
+        .collect::<anyhow::Result<_>>()?;
+    let naive_bytes: u64 = manifest.models.iter().map(|m| m.bytes).sum();
+    let aggregate_assets = |m: &AggregateManifest| -> HashMap<u32, (String, Asset)> {
+        m.nodes
+            .iter()
+            .map(|(&n, e)| {
+                (
+                    n,
+                    (
+                        e.glb.clone(),
+                        Asset {
+                            bytes: e.stats.bytes as u64,
+                            draws: e.stats.submeshes as u64,
+                            textures: e.stats.textures as u64,
+                        },
+                    ),
+                )
+            })
+            .collect()
+    };
+    let ours_assets = aggregate_assets(&ours);
+    let base_assets = aggregate_assets(&base);
+
+    let bounds = bvh
+        .node(bvh.root())
+        .map(|n| n.aabb())
+        .context("the world is empty")?;
+    let positions: Vec<Vec3> = crate::world_cmd::viewpoints(&bounds, seed, views);
+    let mut sums = [0.0f64; 8];
+    let mut per_view = Vec::new();
+    for &position in &positions {
+        let cut = bvh.cut(&CutQuery {
+            position,
+            min_solid_angle,
+            max_results,
+        });
+        let a = join(&bvh, &cut.entries, &model_assets, &ours_assets, &manifest)?;
+        let b = join(&bvh, &cut.entries, &model_assets, &base_assets, &manifest)?;
+        let aggregates = cut
+            .entries
+            .iter()
+            .filter(|e| matches!(e.item, CutItem::Aggregate(_)))
+            .count();
+        for (s, v) in sums.iter_mut().zip([
+            a.bytes as f64,
+            b.bytes as f64,
+            a.draws as f64,
+            b.draws as f64,
+            a.textures as f64,
+            b.textures as f64,
+            cut.entries.len() as f64,
+            aggregates as f64,
+        ]) {
+            *s += v;
+        }
+        per_view.push((a.bytes as f64, b.bytes as f64));
+    }
+    let n = views as f64;
+    let join_bytes_mean = sums[0] / n;
+    let unoptimized_join_bytes_mean = sums[1] / n;
+    let report = Report {
+        views,
+        min_solid_angle,
+        join_bytes_mean,
+        naive_bytes,
+        unoptimized_join_bytes_mean,
+        reduction_vs_naive: 1.0 - join_bytes_mean / naive_bytes.max(1) as f64,
+        reduction_vs_unoptimized: 1.0 - join_bytes_mean / unoptimized_join_bytes_mean.max(1.0),
+        draw_calls_mean: sums[2] / n,
+        unoptimized_draw_calls_mean: sums[3] / n,
+        textures_mean: sums[4] / n,
+        unoptimized_textures_mean: sums[5] / n,
+        entries_mean: sums[6] / n,
+        aggregates_mean: sums[7] / n,
+        per_view,
+        baseline_seconds,
+    };
+    if json {
+        println!("{}", serde_json::to_string(&report)?);
+    } else {
+        print_report(dir, &report);
+    }
+    Ok(())
+}
+
+fn print_report(dir: &Path, r: &Report) {
+    let mb = |b: f64| b / 1e6;
+    println!(
+        "join download of {} over {} views at Omega_min {}:",
+        dir.display(),
+        r.views,
+        r.min_solid_angle
+    );
+    println!(
+        "  ours:        {:>10.3} MB, {:>8.1} draw calls, {:>7.1} textures",
+        mb(r.join_bytes_mean),
+        r.draw_calls_mean,
+        r.textures_mean
+    );
+    println!(
+        "  unoptimised: {:>10.3} MB, {:>8.1} draw calls, {:>7.1} textures",
+        mb(r.unoptimized_join_bytes_mean),
+        r.unoptimized_draw_calls_mean,
+        r.unoptimized_textures_mean
+    );
+    println!("  naive:       {:>10.3} MB", mb(r.naive_bytes as f64));
+    println!(
+        "  reduction: {:.1}% vs naive, {:.1}% vs unoptimised; {:.0} entries per cut, {:.0} aggregates",
+        100.0 * r.reduction_vs_naive,
+        100.0 * r.reduction_vs_unoptimized,
+        r.entries_mean,
+        r.aggregates_mean
+    );
+}
+
+/// Draw calls and textures of one model file (its submeshes and textures).
+fn model_asset(world: &WorldDir, hash: &str, bytes: u64) -> anyhow::Result<Asset> {
+    let path = world.model(hash);
+    let mesh = import_file(&path, &ImportOptions::trusted())
+        .with_context(|| format!("cannot load {}", path.display()))?
+        .mesh;
+    Ok(Asset {
+        bytes,
+        draws: mesh.submeshes.len() as u64,
+        textures: mesh.textures.len() as u64,
+    })
+}
+
+/// The join download of one cut: unique assets' bytes and textures; draw calls per entry.
+fn join(
+    bvh: &Bvh,
+    entries: &[horizon_bvh::CutEntry],
+    models: &[Asset],
+    aggregates: &HashMap<u32, (String, Asset)>,
+    manifest: &WorldManifest,
+) -> anyhow::Result<Asset> {
+    let mut seen_models = BTreeSet::new();
+    let mut seen_aggregates = BTreeSet::new();
+    let mut out = Asset::default();
+    for e in entries {
+        match e.item {
+            CutItem::Object(o) => {
+                let model = bvh.object(o).context("cut names a missing object")?.model() as usize;
+                let a = models
+                    .get(model)
+                    .with_context(|| format!("model {model} of {} missing", manifest.name))?;
+                out.draws += a.draws;
+                if seen_models.insert(model) {
+                    out.bytes += a.bytes;
+                    out.textures += a.textures;
+                }
+            }
+            CutItem::Aggregate(n) => {
+                let (hash, a) = aggregates
+                    .get(&n.0)
+                    .with_context(|| format!("node {} has no aggregate (rebuild)", n.0))?;
+                out.draws += a.draws;
+                if seen_aggregates.insert(hash.clone()) {
+                    out.bytes += a.bytes;
+                    out.textures += a.textures;
+                }
+            }
+        }
+    }
+    Ok(out)
+}
