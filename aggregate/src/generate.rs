@@ -84,6 +84,10 @@ pub struct NodeStats {
     pub placements: usize,
     /// Objects left out as smaller than `cull_pixels`.
     pub culled: usize,
+    /// Model-internal instances (parts) of kept objects left out as smaller than
+    /// `cull_pixels`.
+    #[serde(default)]
+    pub culled_parts: usize,
     /// Distinct models drawn before dedup.
     pub models: usize,
     /// Models replaced by a near-duplicate.
@@ -183,22 +187,38 @@ fn generate_optimized(
             .is_some();
         for (s, inner) in source.placements.iter().enumerate() {
             let key = (model, s as u32);
-            let index = *slot.entry(key).or_insert_with(|| {
-                let sub: Option<Submesh> = if input.children.is_empty() || !has_versions {
-                    Some(source.mesh.submeshes[s].clone())
-                } else {
-                    versions.get(&key).map(|v| (**v).clone())
-                };
-                sub.map(|sub| {
-                    part_of_submesh.push(key);
-                    merge.submesh(model, source, sub)
-                })
-            });
-            let Some(index) = index else { continue };
+            let (centre, radius) = source.part_spheres[s];
             for m in inner {
+                let transform = p.transform * align * *m;
+                // Beyond whole objects, parts under `cull_pixels` are left out too.
+                let scale = transform
+                    .matrix3
+                    .x_axis
+                    .length()
+                    .max(transform.matrix3.y_axis.length())
+                    .max(transform.matrix3.z_axis.length());
+                let part_pixels = input
+                    .display
+                    .object_pixels(transform.transform_point3(centre), radius * scale);
+                if part_pixels < options.cull_pixels && kept.len() > 1 {
+                    stats.culled_parts += 1;
+                    continue;
+                }
+                let index = *slot.entry(key).or_insert_with(|| {
+                    let sub: Option<Submesh> = if input.children.is_empty() || !has_versions {
+                        Some(source.mesh.submeshes[s].clone())
+                    } else {
+                        versions.get(&key).map(|v| (**v).clone())
+                    };
+                    sub.map(|sub| {
+                        part_of_submesh.push(key);
+                        merge.submesh(model, source, sub)
+                    })
+                });
+                let Some(index) = index else { continue };
                 merge.mesh.instances.push(Instance {
                     submesh: index,
-                    transform: p.transform * align * *m,
+                    transform,
                 });
             }
         }

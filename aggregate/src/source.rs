@@ -2,7 +2,7 @@
 
 use std::sync::Arc;
 
-use glam::Affine3A;
+use glam::{Affine3A, Vec3};
 use horizon_mesh::InstancedMesh;
 
 use crate::error::AggregateError;
@@ -23,6 +23,8 @@ pub struct SourceModel {
     pub frame: Option<PcaFrame>,
     /// For each submesh, the transforms of its instances inside the model.
     pub placements: Vec<Vec<Affine3A>>,
+    /// For each submesh, a bounding sphere (centre, radius) in its own space.
+    pub part_spheres: Vec<(Vec3, f32)>,
 }
 
 impl SourceModel {
@@ -38,6 +40,18 @@ impl SourceModel {
                     .collect()
             })
             .collect();
+        let part_spheres = mesh
+            .submeshes
+            .iter()
+            .map(|s| {
+                let b = s.bounds();
+                if b.is_empty() {
+                    (Vec3::ZERO, 0.0)
+                } else {
+                    ((b.min + b.max) * 0.5, (b.max - b.min).length() * 0.5)
+                }
+            })
+            .collect();
         Self {
             hash,
             mesh,
@@ -45,6 +59,7 @@ impl SourceModel {
             texture,
             frame,
             placements,
+            part_spheres,
         }
     }
 }

@@ -22,6 +22,10 @@ use crate::AtlasError;
 /// 8 x 8 source points, enough to average out noise at 1/8 scale while bounding the cost.
 const MAX_SUPERSAMPLE: f64 = 8.0;
 
+/// Texel coordinates are clamped to +-2^52 before conversion to integers: beyond that an f64
+/// has no fractional texels left, and the sum `x0 + 1` stays far from i64 overflow.
+const FAR_TEXEL: f64 = 4_503_599_627_370_496.0;
+
 /// A decoded texture with the wrap modes it is sampled with.
 #[derive(Clone, Debug)]
 pub(crate) struct Source {
@@ -150,7 +154,10 @@ fn encode_texel(colour: Vec4, alpha: AlphaMode, opaque: bool) -> Rgba<u8> {
 pub(crate) fn sample_bilinear(src: &Source, p: DVec2) -> Vec4 {
     let (w, h) = src.image.dimensions();
     let q = p - DVec2::splat(0.5);
-    let f = q.floor();
+    // Far tiles fold like near ones; clamping first keeps `x0 + 1` from overflowing i64.
+    let f = q
+        .floor()
+        .clamp(DVec2::splat(-FAR_TEXEL), DVec2::splat(FAR_TEXEL));
     let t = (q - f).as_vec2();
     let (x0, y0) = (f.x as i64, f.y as i64);
     let xs = [

@@ -109,7 +109,8 @@ pub(crate) fn chart_mesh(
             _ => {
                 let chart = *patches.entry(sub.material).or_insert_with(|| {
                     let mean = textured.map_or(Vec4::ONE, |(_, s)| mean_linear(s));
-                    out.charts.push(patch(material, mean, options.patch_side));
+                    out.charts
+                        .push(patch(sub.material, material, mean, options.patch_side));
                     out.charts.len() - 1
                 });
                 let centre = (out.charts[chart].min + out.charts[chart].max) * 0.5;
@@ -123,18 +124,18 @@ pub(crate) fn chart_mesh(
     if out.charts.is_empty() {
         // Nothing is drawn; one white patch keeps "exactly one texture" meaningful.
         out.charts
-            .push(patch(&default, Vec4::ONE, options.patch_side));
+            .push(patch(None, &default, Vec4::ONE, options.patch_side));
     }
     merge_overlapping(&mut out);
     out
 }
 
-/// A flat patch of `material`'s base colour times `mean`.
-fn patch(material: &Material, mean: Vec4, side: u32) -> Chart {
+/// A flat patch of `material`'s base colour times `mean`; `key` is the material's index.
+fn patch(key: Option<usize>, material: &Material, mean: Vec4, side: u32) -> Chart {
     let side = f64::from(side.max(1));
     Chart {
         texture: None,
-        material: None,
+        material: key,
         factor: material.base_color_factor * mean,
         alpha: material.alpha_mode,
         min: DVec2::ZERO,

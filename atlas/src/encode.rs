@@ -16,9 +16,16 @@ use crate::AtlasError;
 /// instead.
 const JPEG_QUALITIES: [u8; 6] = [90, 80, 70, 60, 45, 30];
 
-/// Each retry shrinks the atlas side to this fraction: JPEG size is roughly proportional to the
-/// texel count, so a fifth off the side takes a third off the bytes.
-const SIDE_STEP: f64 = 0.8;
+/// Aim at the side the square-root estimate predicts fits, without margin: downscaled charts
+/// are smoother and compress better per texel, so the estimate already errs on the small side.
+const SIDE_MARGIN: f64 = 1.0;
+
+/// Each retry shrinks the side at least this much (to 90 percent), so retries end quickly.
+const MIN_SIDE_STEP: f64 = 0.9;
+
+/// Each retry shrinks the side at most this much (to 60 percent), so a bad estimate cannot skip
+/// far past the largest side that fits.
+const MAX_SIDE_STEP: f64 = 0.6;
 
 /// An encoded atlas.
 #[derive(Clone, Debug)]
@@ -31,32 +38,36 @@ pub(crate) struct Encoded {
     pub jpeg_quality: Option<u8>,
 }
 
-/// The best encoding of `image` within `max_bytes`, or `None` when none fits at this size.
+/// The best encoding of `image` within `max_bytes`, or `Err(bytes)` with the smallest encoding
+/// tried when none fits at this size.
 pub(crate) fn encode_within(
     image: &RgbaImage,
     opaque: bool,
     max_bytes: usize,
-) -> Result<Option<Encoded>, AtlasError> {
+) -> Result<Result<Encoded, usize>, AtlasError> {
     let png = encode_png(image, opaque)?;
     if png.len() <= max_bytes {
-        return Ok(Some(Encoded {
+        return Ok(Ok(Encoded {
             bytes: png,
             mime_type: "image/png",
             jpeg_quality: None,
         }));
     }
     if !opaque {
-        return Ok(None);
+        return Ok(Err(png.len()));
     }
     let rgb = rgb_bytes(image);
     // Try the lowest quality first: when even that does not fit, shrink at once.
-    let mut best = None;
+    let mut best = Err(png.len());
     for &quality in JPEG_QUALITIES.iter().rev() {
         let jpeg = encode_jpeg(&rgb, image.width(), image.height(), quality)?;
         if jpeg.len() > max_bytes {
+            if best.is_err() {
+                best = Err(jpeg.len().min(png.len()));
+            }
             break;
         }
-        best = Some(Encoded {
+        best = Ok(Encoded {
             bytes: jpeg,
             mime_type: "image/jpeg",
             jpeg_quality: Some(quality),
@@ -65,10 +76,15 @@ pub(crate) fn encode_within(
     Ok(best)
 }
 
-/// The side to re-pack at after `layout` did not fit the budget, or `None` at one texel.
-pub(crate) fn next_side(layout: &Layout) -> Option<u32> {
+/// The side to re-pack at after `layout` encoded to `bytes` over the budget, or `None` at one
+/// texel. Encoded size is roughly proportional to the texel count, so the side scales by the
+/// square root of the overshoot, with a margin of [`SIDE_MARGIN`], and by at least
+/// [`MIN_SIDE_STEP`] and at most [`MAX_SIDE_STEP`] per retry.
+pub(crate) fn next_side(layout: &Layout, bytes: usize, max_bytes: usize) -> Option<u32> {
     let side = layout.width.max(layout.height);
-    (side > 1).then(|| ((f64::from(side) * SIDE_STEP) as u32).max(1))
+    let ratio = (max_bytes as f64 / bytes.max(1) as f64).sqrt() * SIDE_MARGIN;
+    let step = ratio.clamp(MAX_SIDE_STEP, MIN_SIDE_STEP);
+    (side > 1).then(|| ((f64::from(side) * step) as u32).clamp(1, side - 1))
 }
 
 /// PNG, RGB when opaque (a quarter smaller) and RGBA otherwise.

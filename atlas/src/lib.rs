@@ -33,10 +33,12 @@
 //!   may span several tiles or lie outside [0, 1]; this is the same as shifting the island by
 //!   whole tiles. A chart spans at most [`MAX_TILES_PER_AXIS`] source widths of texels per axis;
 //!   a chart that tiles further keeps that many texels and is sampled at lower density.
-//! - **Scale.** One global texel scale for every chart (textured and patch), the largest <= 1
-//!   found by geometric shrinking at which the crunch packer places all padded rectangles in
-//!   `max_side` squared. Below scale 1, each atlas texel averages a grid of bilinear samples
-//!   (a box filter) so that downscaled noise does not alias.
+//! - **Scale.** One global texel scale for every chart (textured and patch): the largest <= 1
+//!   at which the crunch packer places all padded rectangles in `max_side` squared, found by
+//!   shrinking 10% at a time from the area bound and then bisecting the last step. The packer
+//!   spreads rectangles over the square it is given, so the square is then tightened from the
+//!   area bound up in 5% steps. Below scale 1, each atlas texel averages a grid of bilinear
+//!   samples (a box filter) so that downscaled noise does not alias.
 //! - **Colour.** glTF base colour textures are sRGB and the factor is linear: texels are decoded
 //!   to linear light, filtered, multiplied by the factor and encoded back to sRGB. Alpha is
 //!   linear. A `Mask` material's alpha is baked as 0 or 1 against its own cut-off, so masks with
@@ -46,8 +48,20 @@
 //! - **Budget.** The atlas is cropped to the packed extent. A lossless PNG is kept when it fits
 //!   `max_bytes` (flat patches and small atlases stay exact); otherwise an opaque atlas becomes
 //!   a JPEG at the highest quality of a fixed ladder that fits, and an atlas whose alpha matters
-//!   stays PNG. When nothing fits, the side shrinks by a fifth and the charts are re-packed and
-//!   re-baked (never resampled from the baked atlas, so gutters stay intact).
+//!   stays PNG. When nothing fits, the side shrinks by the square root of the overshoot (bytes
+//!   grow with the texel count) and the charts are re-packed and re-baked, never resampled from
+//!   the baked atlas, so gutters stay intact.
+//!
+//! # Limits
+//!
+//! - Charts are axis-aligned UV boxes, never rotated: a diagonal island wastes its box's corners.
+//! - Filtering is not alpha-premultiplied: below scale 1, colour of transparent texels can bleed
+//!   into the edges of `Blend` cut-outs.
+//! - Gutters guard bilinear filtering and the first mip levels only; deep mips and JPEG's 8x8
+//!   blocks (and chroma subsampling) can still mix neighbouring charts slightly.
+//! - crunch's packing time grows about quadratically with the chart count (one to two seconds
+//!   per packing of 3,000 charts), and a build packs a dozen or so times; an aggregate with
+//!   thousands of islands would want islands grouped into fewer charts first.
 
 mod bake;
 mod chart;
@@ -100,12 +114,15 @@ pub fn build_atlas(
         // Stage 3: bake.
         let image = bake::bake_atlas(&charting.charts, &layout, &sources, opaque);
         // Stage 5: encode under the byte budget.
-        if let Some(encoded) = encode::encode_within(&image, opaque, options.max_bytes)? {
-            break (layout, scale, encoded);
-        }
-        side = encode::next_side(&layout).ok_or(AtlasError::OverBudget {
-            max_bytes: options.max_bytes,
-        })?;
+        let smallest = match encode::encode_within(&image, opaque, options.max_bytes)? {
+            Ok(encoded) => break (layout, scale, encoded),
+            Err(smallest) => smallest,
+        };
+        side = encode::next_side(&layout, smallest, options.max_bytes).ok_or(
+            AtlasError::OverBudget {
+                max_bytes: options.max_bytes,
+            },
+        )?;
     };
     // Stage 4: remap every vertex's UV into the atlas.
     let submeshes = remap::remap_uvs(mesh, &charting, &layout);
@@ -216,7 +233,7 @@ fn material_of<'a>(mesh: &'a InstancedMesh, sub: &Submesh, default: &'a Material
 
 /// The one output material: factors baked (white), no UV transform, alpha mode strong enough for
 /// every input (Blend > Mask > Opaque), double-sided if any input is, and the mean metallic and
-/// roughness of the materials the submeshes use.
+/// roughness over the submeshes' materials (one vote per submesh).
 fn merge_materials(mesh: &InstancedMesh) -> Material {
     let default = Material::default();
     let used: Vec<&Material> = mesh

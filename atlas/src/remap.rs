@@ -46,5 +46,13 @@ pub(crate) fn remap_uvs(
 fn atlas_point(chart: &Chart, rect: &PackedRect, at: DVec2) -> DVec2 {
     let origin = DVec2::new(f64::from(rect.x), f64::from(rect.y));
     let size = DVec2::new(f64::from(rect.width), f64::from(rect.height));
-    origin + (at - chart.min) / (chart.max - chart.min) * size
+    let extent = chart.max - chart.min;
+    // Far from the origin (UVs near 1e16 and beyond) a box can lose its width to rounding; its
+    // points then go to the middle rather than to NaN. Clamping keeps rounding inside the box.
+    let rel = DVec2::select(
+        extent.cmpgt(DVec2::ZERO),
+        ((at - chart.min) / extent).clamp(DVec2::ZERO, DVec2::ONE),
+        DVec2::splat(0.5),
+    );
+    origin + rel * size
 }

@@ -386,3 +386,59 @@ fn smaller_max_side_lowers_the_texel_scale() {
     assert!(report.texel_scale < 0.5);
     assert!(report.width <= 32 && report.height <= 32);
 }
+
+#[test]
+fn impossible_budget_is_a_typed_error() {
+    // No PNG or JPEG of even one texel fits in 16 bytes (the PNG signature alone is 8).
+    let input = mesh(
+        vec![quad(box_uvs(Vec2::ZERO, Vec2::ONE), Some(0))],
+        vec![material(Vec4::ONE, Some(0), AlphaMode::Opaque)],
+        vec![png_texture(&noise(16, 16, 5, false), Wrap::Repeat)],
+    );
+    let options = AtlasOptions {
+        max_bytes: 16,
+        ..AtlasOptions::default()
+    };
+    let err = build_atlas(&input, &options).expect_err("must fail");
+    assert!(
+        matches!(err, AtlasError::OverBudget { max_bytes: 16 }),
+        "{err}"
+    );
+}
+
+#[test]
+fn far_away_uvs_do_not_break_anything() {
+    // UVs around 1e6 tile a Repeat texture a million times over; around 1e20 an f32 cannot even
+    // tell the quad's corners apart. Both must give a valid mesh with UVs inside the atlas.
+    for base in [1.0e6f32, 1.0e20] {
+        let input = mesh(
+            vec![quad(
+                box_uvs(Vec2::splat(base), Vec2::splat(base + 0.5)),
+                Some(0),
+            )],
+            vec![material(Vec4::ONE, Some(0), AlphaMode::Opaque)],
+            vec![png_texture(&gradient(4, 4), Wrap::MirroredRepeat)],
+        );
+        atlased(&input, &AtlasOptions::default());
+    }
+}
+
+#[test]
+fn textured_material_without_uvs_is_its_mean_colour() {
+    // A 2x1 texture of black and white has mean linear 0.5, sRGB 188: without UVs the submesh
+    // gets a flat patch of that colour.
+    let tex = image::RgbaImage::from_fn(2, 1, |x, _| {
+        let v = if x == 0 { 0 } else { 255 };
+        Rgba([v, v, v, 255])
+    });
+    let mut sub = quad(box_uvs(Vec2::ZERO, Vec2::ONE), Some(0));
+    sub.uvs = None;
+    let input = mesh(
+        vec![sub],
+        vec![material(Vec4::ONE, Some(0), AlphaMode::Opaque)],
+        vec![png_texture(&tex, Wrap::Repeat)],
+    );
+    let (_, report, atlas) = atlased(&input, &AtlasOptions::default());
+    assert_eq!(report.patches, 1);
+    assert!(atlas.pixels().all(|p| *p == Rgba([188, 188, 188, 255])));
+}

@@ -406,3 +406,184 @@ fn join(
     }
     Ok(out)
 }
+
+/// `horizon bench-aggregates`: what issue 6's build targets are measured with.
+#[derive(Debug, Serialize)]
+pub struct AggregateBench {
+    /// The world's name.
+    pub world: String,
+    /// Objects and nodes.
+    pub objects: usize,
+    /// Nodes of the tree (one aggregate each).
+    pub nodes: usize,
+    /// The full build.
+    pub full: BuildReport,
+    /// Objects inserted before the incremental rebuild.
+    pub inserted: usize,
+    /// Ancestors of the inserted objects after insertion.
+    pub ancestors: usize,
+    /// Nodes rebuilt that are neither ancestors nor children of ancestors (must be 0).
+    pub rebuilt_elsewhere: usize,
+    /// The incremental rebuild.
+    pub incremental: BuildReport,
+    /// `incremental.seconds / full.seconds`.
+    pub incremental_ratio: f64,
+    /// Peak resident memory of the process, bytes.
+    pub peak_memory_bytes: u64,
+}
+
+/// Full build of `DIR/aggregates` from scratch, then `insert` seeded objects into the tree
+/// and an incremental rebuild; the world's manifest is restored to the full build's.
+pub fn bench(dir: &Path, insert: usize, seed: u64, out: Option<&Path>) -> anyhow::Result<()> {
+    let world = WorldDir::new(dir);
+    let (manifest, _objects) = world.load()?;
+    let mut bvh: Bvh = WorldDir::read_json(&world.bvh())
+        .with_context(|| format!("no built world in {} (run horizon build)", dir.display()))?;
+    let cache: DescriptorCache = WorldDir::read_json(&world.descriptors())?;
+    let models = load_models(&world, &manifest, &cache)?;
+    let store = aggregate_store(dir);
+    if store.root().exists() {
+        std::fs::remove_dir_all(store.root())
+            .with_context(|| format!("cannot clear {}", store.root().display()))?;
+    }
+    let options = AggregateOptions::default();
+    let full = build_into(&bvh, &models, &store, options, "full build")?;
+    let full_manifest = store.manifest()?.context("full build wrote no manifest")?;
+
+    // Insert seeded copies of existing models at random places.
+    let bounds = bvh
+        .node(bvh.root())
+        .map(|n| n.aabb())
+        .context("the world is empty")?;
+    let mut rng = horizon_worldgen::rng::Rng::new(seed);
+    let mut inserted = Vec::new();
+    for _ in 0..insert {
+        let m = rng.below(manifest.models.len());
+        let hash = &manifest.models[m].hash;
+        let d = cache.models.get(hash).context("model without descriptors")?;
+        let t = glam::Affine3A::from_rotation_translation(
+            glam::Quat::from_rotation_y(rng.range(0.0, std::f32::consts::TAU)),
+            Vec3::new(
+                rng.range(bounds.min.x, bounds.max.x),
+                0.0,
+                rng.range(bounds.min.z, bounds.max.z),
+            ),
+        );
+        let id = bvh.insert(&horizon_bvh::NewObject {
+            model: m as u64,
+            transform: t,
+            sphere: horizon_bvh::Sphere::new(
+                t.transform_point3(Vec3::from_array(d.centre)),
+                d.radius,
+            ),
+            shape: &d.zernike,
+            texture: &d.csd,
+        })?;
+        inserted.push(id);
+    }
+    let mut ancestors = BTreeSet::new();
+    for &id in &inserted {
+        let mut at = bvh.object(id).map(|o| o.leaf());
+        while let Some(n) = at {
+            ancestors.insert(n.0);
+            at = bvh.node(n).and_then(|r| r.parent());
+        }
+    }
+    let incremental = build_into(&bvh, &models, &store, options, "incremental")?;
+    let after = store.manifest()?.context("incremental build wrote no manifest")?;
+    let before_keys: BTreeSet<&String> = full_manifest.nodes.values().map(|e| &e.key).collect();
+    let rebuilt_elsewhere = after
+        .nodes
+        .iter()
+        .filter(|(_, e)| !before_keys.contains(&e.key))
+        .filter(|(&n, _)| {
+            !ancestors.contains(&n)
+                && !bvh
+                    .node(horizon_bvh::NodeId(n))
+                    .and_then(|r| r.parent())
+                    .is_some_and(|p| ancestors.contains(&p.0))
+        })
+        .count();
+    // The world on disk is still the one without the inserted objects.
+    store.write_manifest(&full_manifest)?;
+    let result = AggregateBench {
+        world: manifest.name.clone(),
+        objects: bvh.len() - insert,
+        nodes: full.nodes,
+        incremental_ratio: incremental.seconds / full.seconds.max(1e-9),
+        full,
+        inserted: insert,
+        ancestors: ancestors.len(),
+        rebuilt_elsewhere,
+        incremental,
+        peak_memory_bytes: peak_memory_bytes(),
+    };
+    let md = bench_markdown(&result);
+    let path = out.map(Path::to_path_buf).unwrap_or_else(|| {
+        Path::new("bench/results").join(format!("aggregates_{}.md", manifest.name))
+    });
+    crate::mesh_cmd::write_atomically(&path, md.as_bytes())?;
+    println!("{md}");
+    eprintln!("wrote {}", path.display());
+    Ok(())
+}
+
+/// Peak resident set size of this process (Linux `VmHWM`), 0 where unknown.
+pub fn peak_memory_bytes() -> u64 {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("VmHWM:"))
+                .and_then(|l| l.split_whitespace().nth(1)?.parse::<u64>().ok())
+        })
+        .map_or(0, |kb| kb * 1024)
+}
+
+fn bench_markdown(r: &AggregateBench) -> String {
+    let limit = match r.world.as_str() {
+        "village" => Some(60.0),
+        "city" => Some(600.0),
+        _ => None,
+    };
+    let verdict = |ok: bool| if ok { "PASS" } else { "FAIL" };
+    let mut s = format!(
+        "# Aggregate build: {}\n\n`horizon bench-aggregates DIR --insert {}` on this machine (2 cores), one run.\n\n",
+        r.world, r.inserted
+    );
+    s += "| measure | value | target | verdict |\n|---|---|---|---|\n";
+    s += &format!(
+        "| full build ({} objects, {} aggregates) | {:.1} s | {} | {} |\n",
+        r.objects,
+        r.nodes,
+        r.full.seconds,
+        limit.map_or("report".into(), |l| format!("<= {l} s")),
+        limit.map_or("-", |l| verdict(r.full.seconds <= l))
+    );
+    s += &format!(
+        "| peak memory | {:.2} GB | <= 8 GB | {} |\n",
+        r.peak_memory_bytes as f64 / 1e9,
+        verdict(r.peak_memory_bytes <= 8 << 30)
+    );
+    s += &format!(
+        "| incremental after {} inserts: aggregates rebuilt | {} (ancestors {}, elsewhere {}) | only ancestors (and split siblings) | {} |\n",
+        r.inserted,
+        r.incremental.built,
+        r.ancestors,
+        r.rebuilt_elsewhere,
+        verdict(r.rebuilt_elsewhere == 0)
+    );
+    s += &format!(
+        "| incremental time | {:.2} s = {:.2}% of full | <= 5% | {} |\n",
+        r.incremental.seconds,
+        100.0 * r.incremental_ratio,
+        verdict(r.incremental_ratio <= 0.05)
+    );
+    s += &format!(
+        "| aggregate bytes | {:.1} MB | - | - |\n| failed aggregates | {} | 0 | {} |\n",
+        r.full.bytes_total as f64 / 1e6,
+        r.full.failed.len(),
+        verdict(r.full.failed.is_empty())
+    );
+    s
+}

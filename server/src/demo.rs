@@ -6,7 +6,10 @@
 //!    generated one, and prints every pair's differences against the calibrated Table 1;
 //! 3. generates the Table 2 benchmark models and simplifies each to 20% of its expanded
 //!    triangles with instance-aware simplification (IAS) and with the quadric baseline on the
-//!    expanded mesh, printing time, output size and error side by side.
+//!    expanded mesh, printing time, output size and error side by side;
+//! 4. generates the village world, builds its BVH and every aggregate (the offline rebuild),
+//!    and prints the join-download report against the naive client and unoptimised
+//!    aggregates.
 
 use std::path::Path;
 
@@ -60,7 +63,26 @@ pub fn run(out: &Path) -> anyhow::Result<()> {
     }
     println!("wrote plain and compressed GLB files to {}", out.display());
     descriptors()?;
-    simplification(out)
+    simplification(out)?;
+    world(out)
+}
+
+/// Stage 4: the village world, built and reported.
+fn world(out: &Path) -> anyhow::Result<()> {
+    println!();
+    println!("the village world: generate, build the BVH and every aggregate, report");
+    let dir = out.join("village");
+    if dir.exists() {
+        std::fs::remove_dir_all(&dir).with_context(|| format!("cannot clear {}", dir.display()))?;
+    }
+    crate::world_cmd::gen_world("village", &dir, 1, None)?;
+    let args = crate::aggregate_cmd::AggregateArgs {
+        pixels_per_triangle: 16.0,
+        min_solid_angle: 1e-3,
+        atlas: horizon_aggregate::AtlasPolicy::Always,
+    };
+    crate::world_cmd::build(&dir, 0.8, 0.2, Some(args), false)?;
+    crate::aggregate_cmd::report(&dir, 10, 1, 1e-3, 4000, false)
 }
 
 /// Stage 2: descriptors of the embedded and generated models, and which pairs the calibrated

@@ -219,6 +219,22 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Issue 6's build benchmark: a full aggregate build of a built world from scratch
+    /// (time, memory), then seeded inserts and the incremental rebuild (what it touched and
+    /// how long it took). Writes bench/results/aggregates_<world>.md.
+    BenchAggregates {
+        /// The built world directory.
+        dir: PathBuf,
+        /// Objects inserted before the incremental rebuild.
+        #[arg(long, default_value_t = 100)]
+        insert: usize,
+        /// Seed of the inserted objects.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// The markdown report (default: bench/results/aggregates_<world name>.md).
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
     /// Runs the main job on the embedded default models and writes the results to a folder.
     Demo {
         /// Where to write the demo's output.
@@ -440,6 +456,12 @@ fn main() -> ExitCode {
             out,
             json,
         }),
+        Command::BenchAggregates {
+            dir,
+            insert,
+            seed,
+            out,
+        } => aggregate_cmd::bench(&dir, insert, seed, out.as_deref()),
         Command::Demo { out } => demo::run(&out),
     };
     match result {

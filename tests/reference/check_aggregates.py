@@ -1,0 +1,101 @@
+"""Reference checks of the aggregates `horizon build` writes (issue 6), with third-party tools:
+
+  1. the Khronos glTF-Validator reports 0 errors for every aggregate GLB;
+  2. trimesh loads every aggregate, with at least one triangle;
+  3. every aggregate has exactly one material and one texture, read from the GLB's own JSON
+     chunk here (not by Horizon's code), and that texture is at most 128 KiB;
+  4. the manifest names an aggregate for every node of the tree, and every file it names exists.
+
+Usage: check_aggregates.py HORIZON_BINARY VALIDATE_MJS [--dir BUILT_WORLD]
+Without --dir, generates and builds the village world in a temporary folder first.
+Prints one line per failed check and a closing 'N passed, M failed' line; exits 1 on failure."""
+import json
+import pathlib
+import struct
+import subprocess
+import sys
+import tempfile
+
+import trimesh
+
+
+def glb_json(path):
+    data = path.read_bytes()
+    magic, _version, _length = struct.unpack_from("<4sII", data, 0)
+    assert magic == b"glTF", f"{path}: not a GLB"
+    chunk_length, chunk_type = struct.unpack_from("<II", data, 12)
+    assert chunk_type == 0x4E4F534A, f"{path}: first chunk is not JSON"
+    return json.loads(data[20 : 20 + chunk_length]), data
+
+
+def image_bytes(doc, data):
+    """Encoded sizes of every image, from its buffer view in the GLB's BIN chunk."""
+    json_length = struct.unpack_from("<I", data, 12)[0]
+    bin_offset = 20 + json_length + 8
+    sizes = []
+    for image in doc.get("images", []):
+        view = doc["bufferViews"][image["bufferView"]]
+        sizes.append(view["byteLength"])
+        assert bin_offset + view.get("byteOffset", 0) + view["byteLength"] <= len(data)
+    return sizes
+
+
+def main(horizon, validate_mjs, world):
+    passed, failed = 0, 0
+
+    def check(name, ok, detail=""):
+        nonlocal passed, failed
+        if ok:
+            passed += 1
+        else:
+            failed += 1
+            print(f"FAIL {name} {detail}")
+
+    manifest = json.loads((world / "aggregates" / "manifest.json").read_text())
+    bvh = json.loads((world / "bvh.json").read_text())
+    files = sorted({world / "aggregates" / f"{e['glb']}.glb" for e in manifest["nodes"].values()})
+    check("manifest covers the tree", len(manifest["nodes"]) > 0, f"{len(manifest['nodes'])} nodes")
+    for f in files:
+        check(f"exists {f.name}", f.exists())
+    # 1. Khronos glTF-Validator, in batches.
+    errors = 0
+    for k in range(0, len(files), 200):
+        out = subprocess.run(
+            ["node", str(validate_mjs)] + [str(f) for f in files[k : k + 200]],
+            capture_output=True,
+            text=True,
+        )
+        for line in out.stdout.splitlines():
+            r = json.loads(line)
+            check(f"validator {pathlib.Path(r['file']).name}", r["errors"] == 0, r["messages"])
+            errors += r["errors"]
+    # 2-3. trimesh, and one material and one texture of at most 128 KiB.
+    for f in files:
+        doc, data = glb_json(f)
+        check(f"one material {f.name}", len(doc.get("materials", [])) == 1, len(doc.get("materials", [])))
+        check(f"one texture {f.name}", len(doc.get("textures", [])) == 1, len(doc.get("textures", [])))
+        sizes = image_bytes(doc, data)
+        check(f"texture <= 128 KiB {f.name}", len(sizes) == 1 and sizes[0] <= 128 * 1024, sizes)
+        try:
+            scene = trimesh.load(f, force="scene")
+            tris = sum(len(g.faces) for g in scene.geometry.values())
+            check(f"trimesh {f.name}", tris > 0, f"{tris} triangles")
+        except Exception as e:  # noqa: BLE001 - any loader failure is a failed check
+            check(f"trimesh {f.name}", False, repr(e))
+    print(f"{len(files)} aggregates checked, validator errors {errors}")
+    print(f"{passed} passed, {failed} failed")
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    args = sys.argv[1:]
+    if len(args) not in (2, 4):
+        sys.exit(__doc__)
+    horizon, validate_mjs = args[0], pathlib.Path(args[1]).resolve()
+    if len(args) == 4 and args[2] == "--dir":
+        sys.exit(main(horizon, validate_mjs, pathlib.Path(args[3])))
+    with tempfile.TemporaryDirectory() as tmp:
+        world = pathlib.Path(tmp) / "village"
+        subprocess.run([horizon, "gen", "world", "village", str(world)], check=True)
+        subprocess.run([horizon, "build", str(world)], check=True)
+        sys.exit(main(horizon, validate_mjs, world))
