@@ -40,3 +40,5 @@ GLTF_VALIDATOR_DIR="$tools/npm" "$tools/venv/bin/python" tests/reference/check_m
   target/release/horizon tests/reference/validate.mjs
 GLTF_VALIDATOR_DIR="$tools/npm" "$tools/venv/bin/python" tests/reference/check_simplify.py \
   target/release/horizon tests/reference/validate.mjs
+GLTF_VALIDATOR_DIR="$tools/npm" "$tools/venv/bin/python" tests/reference/check_aggregates.py \
+  target/release/horizon tests/reference/validate.mjs

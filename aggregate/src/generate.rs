@@ -112,6 +112,9 @@ pub struct NodeStats {
     pub texture_bytes: usize,
     /// GLB bytes.
     pub bytes: usize,
+    /// Wall time of building it, seconds.
+    #[serde(default)]
+    pub seconds: f64,
 }
 
 /// A built aggregate.
@@ -144,7 +147,7 @@ fn generate_optimized(
     table: &Table1,
     options: &AggregateOptions,
 ) -> Result<NodeOutput, AggregateError> {
-    let _start = Instant::now();
+    let start = Instant::now();
     let mut stats = NodeStats {
         placements: input.placements.len(),
         budget: input.display.triangle_budget(options),
@@ -264,7 +267,9 @@ fn generate_optimized(
     } else {
         simplified
     };
-    finish(input.node, out, handoff, stats)
+    let mut out = finish(input.node, out, handoff, stats)?;
+    out.stats.seconds = start.elapsed().as_secs_f64();
+    Ok(out)
 }
 
 /// The unoptimised baseline: children expanded into one mesh, QEM to the same budget.
@@ -273,6 +278,7 @@ fn generate_unoptimized(
     models: &dyn ModelSource,
     options: &AggregateOptions,
 ) -> Result<NodeOutput, AggregateError> {
+    let start = Instant::now();
     let mut stats = NodeStats {
         placements: input.placements.len(),
         budget: input.display.triangle_budget(options),
@@ -316,7 +322,9 @@ fn generate_unoptimized(
         mesh: simplified.clone(),
         material_keys,
     }));
-    finish(input.node, simplified, handoff, stats)
+    let mut out = finish(input.node, simplified, handoff, stats)?;
+    out.stats.seconds = start.elapsed().as_secs_f64();
+    Ok(out)
 }
 
 /// Encodes the aggregate and fills in its counts.

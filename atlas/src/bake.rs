@@ -230,13 +230,26 @@ fn srgb_to_linear_table() -> &'static [f32; 256] {
 
 /// Linear light to the nearest sRGB 8-bit code.
 pub(crate) fn linear_to_srgb8(x: f32) -> u8 {
-    let x = f64::from(x.clamp(0.0, 1.0));
-    let c = if x <= 0.0031308 {
-        x * 12.92
-    } else {
-        1.055 * x.powf(1.0 / 2.4) - 0.055
-    };
-    (c * 255.0).round().clamp(0.0, 255.0) as u8
+    // The code whose sRGB value rounds to x: the number of decision points below x, where the
+    // decision point between codes v and v + 1 is the linear value of sRGB (v + 0.5) / 255.
+    let thresholds = srgb_thresholds();
+    thresholds.partition_point(|&t| t <= x) as u8
+}
+
+/// Linear values at which the 8-bit sRGB code steps up (255 of them).
+fn srgb_thresholds() -> &'static [f32; 255] {
+    static TABLE: OnceLock<[f32; 255]> = OnceLock::new();
+    TABLE.get_or_init(|| {
+        std::array::from_fn(|v| {
+            let c = (v as f64 + 0.5) / 255.0;
+            let l = if c <= 0.04045 {
+                c / 12.92
+            } else {
+                ((c + 0.055) / 1.055).powf(2.4)
+            };
+            l as f32
+        })
+    })
 }
 
 #[cfg(test)]

@@ -114,10 +114,11 @@ pub fn build_atlas(
         // Stage 3: bake.
         let image = bake::bake_atlas(&charting.charts, &layout, &sources, opaque);
         // Stage 5: encode under the byte budget.
-        let smallest = match encode::encode_within(&image, opaque, options.max_bytes)? {
-            Ok(encoded) => break (layout, scale, encoded),
-            Err(smallest) => smallest,
-        };
+        let smallest =
+            match encode::encode_within(&image, opaque, options.max_bytes, options.lossless)? {
+                Ok(encoded) => break (layout, scale, encoded),
+                Err(smallest) => smallest,
+            };
         side = encode::next_side(&layout, smallest, options.max_bytes).ok_or(
             AtlasError::OverBudget {
                 max_bytes: options.max_bytes,
@@ -154,6 +155,9 @@ pub struct AtlasOptions {
     pub gutter: u32,
     /// Side in texels (at scale 1) of the flat colour patch of an untextured material.
     pub patch_side: u32,
+    /// Keep a lossless PNG whenever it fits the budget, even when a JPEG would be smaller
+    /// (exact texels). Default false: the smaller encoding, since every byte is downloaded.
+    pub lossless: bool,
 }
 
 impl Default for AtlasOptions {
@@ -163,6 +167,7 @@ impl Default for AtlasOptions {
             max_side: 1024,
             gutter: 2,
             patch_side: 4,
+            lossless: false,
         }
     }
 }

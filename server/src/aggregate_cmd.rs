@@ -460,7 +460,10 @@ pub fn bench(dir: &Path, insert: usize, seed: u64, out: Option<&Path>) -> anyhow
     for _ in 0..insert {
         let m = rng.below(manifest.models.len());
         let hash = &manifest.models[m].hash;
-        let d = cache.models.get(hash).context("model without descriptors")?;
+        let d = cache
+            .models
+            .get(hash)
+            .context("model without descriptors")?;
         let t = glam::Affine3A::from_rotation_translation(
             glam::Quat::from_rotation_y(rng.range(0.0, std::f32::consts::TAU)),
             Vec3::new(
@@ -490,7 +493,9 @@ pub fn bench(dir: &Path, insert: usize, seed: u64, out: Option<&Path>) -> anyhow
         }
     }
     let incremental = build_into(&bvh, &models, &store, options, "incremental")?;
-    let after = store.manifest()?.context("incremental build wrote no manifest")?;
+    let after = store
+        .manifest()?
+        .context("incremental build wrote no manifest")?;
     let before_keys: BTreeSet<&String> = full_manifest.nodes.values().map(|e| &e.key).collect();
     let rebuilt_elsewhere = after
         .nodes
