@@ -14,9 +14,12 @@
 //! triangle per `pixels_per_triangle` pixels of that worst case. Triangles smaller than a few
 //! pixels cannot change the image, so a budget proportional to covered pixels bounds the
 //! on-screen error while keeping far-away, small aggregates tiny. The constant 16 (a 4 x 4
-//! pixel footprint per triangle) was chosen with `horizon build --pixels-per-triangle` on the
-//! village and city: see `bench/results/aggregates.md` for the sweep of join bytes against
-//! it.
+//! pixel footprint per triangle) is the coarsest of 4, 16 and 64 that kept the simplification
+//! error under one pixel at the nearest display distance on the village (median and p95 0.66
+//! px at 16; 2.4 and 2.5 px at 64), while 4 left almost nothing simplified (5 of 1,227
+//! aggregates). The join download barely moves with it (8.28, 8.23, 7.88 MB), because instance
+//! transforms and textures, not triangles, dominate aggregate bytes there. Measured by
+//! `bench/budget_sweep.py`, results in `bench/results/budget_village.md`.
 
 use glam::Vec3;
 use horizon_descriptors::calibrate::pixel_solid_angle;
@@ -26,8 +29,9 @@ use crate::options::AggregateOptions;
 /// Fewest expanded triangles an aggregate is asked to keep.
 pub const MIN_TRIANGLES: u64 = 64;
 
-/// Smallest and largest atlas side the budget may ask for.
-pub const ATLAS_SIDE: (u32, u32) = (32, 1024);
+/// Smallest and largest atlas side the budget may ask for. 512 x 512 is about what a 128 KiB
+/// JPEG holds at good quality; starting larger only bakes an atlas to throw away.
+pub const ATLAS_SIDE: (u32, u32) = (32, 512);
 
 /// Where and how large a node's aggregate can appear.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -95,9 +99,18 @@ impl Display {
         solid_angle(f64::from(r), d).min(screen_solid_angle()) / pixel_solid_angle()
     }
 
-    /// Atlas side: about one texel per covered pixel, a power of two in [`ATLAS_SIDE`].
-    pub fn atlas_side(&self) -> u32 {
-        let side = self.pixels.sqrt().ceil().max(1.0) as u32;
+    /// How many pixels a length seen face-on at the nearest display distance spans.
+    pub fn pixels_of_length(&self, length: f64) -> f64 {
+        length / (self.distance.max(f64::MIN_POSITIVE) * pixel_solid_angle().sqrt())
+    }
+
+    /// Atlas side: `texels_per_pixel` texels per covered pixel, a power of two in
+    /// [`ATLAS_SIDE`].
+    pub fn atlas_side(&self, options: &AggregateOptions) -> u32 {
+        let side = (self.pixels * options.texels_per_pixel)
+            .sqrt()
+            .ceil()
+            .max(1.0) as u32;
         side.next_power_of_two().clamp(ATLAS_SIDE.0, ATLAS_SIDE.1)
     }
 }

@@ -115,6 +115,12 @@ pub struct NodeStats {
     /// Wall time of building it, seconds.
     #[serde(default)]
     pub seconds: f64,
+    /// The simplifier's error (RMS quadric distance, world units), 0 when not simplified.
+    #[serde(default)]
+    pub error: f64,
+    /// That error in pixels at the nearest display distance.
+    #[serde(default)]
+    pub error_pixels: f64,
 }
 
 /// A built aggregate.
@@ -239,6 +245,8 @@ fn generate_optimized(
             node: input.node,
             source,
         })?;
+        stats.error = s.report.error;
+        stats.error_pixels = input.display.pixels_of_length(s.report.error);
         (s.mesh, s.kept)
     } else {
         let n = merged.submeshes.len();
@@ -255,7 +263,7 @@ fn generate_optimized(
     let out = if input.atlas {
         let atlas_options = AtlasOptions {
             max_bytes: options.atlas_bytes,
-            max_side: input.display.atlas_side(),
+            max_side: input.display.atlas_side(options),
             ..AtlasOptions::default()
         };
         build_atlas(&simplified, &atlas_options)
@@ -312,12 +320,15 @@ fn generate_unoptimized(
     let merged = merge.mesh;
     stats.triangles_in = merged.expanded_triangle_count();
     let target = Target::Triangles(stats.budget.min(stats.triangles_in));
-    let simplified = simplify_qem(&merged, target, &SimplifyOptions::default())
-        .map_err(|source| AggregateError::Simplify {
+    let result = simplify_qem(&merged, target, &SimplifyOptions::default()).map_err(|source| {
+        AggregateError::Simplify {
             node: input.node,
             source,
-        })?
-        .mesh;
+        }
+    })?;
+    stats.error = result.report.error;
+    stats.error_pixels = input.display.pixels_of_length(result.report.error);
+    let simplified = result.mesh;
     let handoff = Handoff::Expanded(Arc::new(ExpandedPart {
         mesh: simplified.clone(),
         material_keys,

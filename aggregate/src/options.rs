@@ -27,6 +27,7 @@ pub enum Method {
 
 /// Knobs of the rebuild. Start from [`AggregateOptions::default`].
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
 pub struct AggregateOptions {
     /// The smallest solid angle (steradians) a client asks to see as itself. It fixes how
     /// close an aggregate can be shown (`budget.rs`), hence its triangle and texel budgets.
@@ -47,6 +48,11 @@ pub struct AggregateOptions {
     pub atlas: AtlasPolicy,
     /// Encoded size limit of an atlas texture. Default 128 KiB (section 7).
     pub atlas_bytes: usize,
+    /// Atlas texels per pixel the aggregate covers at its nearest display distance. Default
+    /// 0.25 (one texel per 2 x 2 pixels): an aggregate stands for objects each under
+    /// `min_solid_angle`, and at one texel per pixel its atlas was most of the city's join
+    /// download.
+    pub texels_per_pixel: f64,
     /// Optimised pipeline or the unoptimised baseline.
     pub method: Method,
 }
@@ -61,6 +67,7 @@ impl Default for AggregateOptions {
             dedup: true,
             atlas: AtlasPolicy::Always,
             atlas_bytes: 128 * 1024,
+            texels_per_pixel: 0.25,
             method: Method::Optimized,
         }
     }
@@ -101,6 +108,7 @@ impl AggregateOptions {
         if self.dedup_solid_angle >= 2.0 * std::f64::consts::PI {
             return Err("dedup_solid_angle must be below 2 pi".into());
         }
+        positive("texels_per_pixel", self.texels_per_pixel)?;
         if self.atlas_bytes < 1024 {
             return Err(format!("atlas_bytes {} is below 1 KiB", self.atlas_bytes));
         }
@@ -111,7 +119,7 @@ impl AggregateOptions {
     /// options never reuse an aggregate built under other ones.
     pub fn fingerprint(&self) -> String {
         format!(
-            "v{}|{:e}|{:e}|{:e}|{:e}|{}|{:?}|{}|{:?}",
+            "v{}|{:e}|{:e}|{:e}|{:e}|{}|{:?}|{}|{:e}|{:?}",
             crate::FORMAT,
             self.min_solid_angle,
             self.dedup_solid_angle,
@@ -120,6 +128,7 @@ impl AggregateOptions {
             self.dedup,
             self.atlas,
             self.atlas_bytes,
+            self.texels_per_pixel,
             self.method
         )
     }

