@@ -45,10 +45,10 @@
 //!   different cut-offs survive one output cut-off of 0.5.
 //! - **Gutters.** `gutter` texels around every chart repeat the chart's edge texels, so bilinear
 //!   filtering (and the first mip levels) at chart borders do not bleed in neighbours.
-//! - **Budget.** The atlas is cropped to the packed extent. A lossless PNG is kept when it fits
-//!   `max_bytes` (flat patches and small atlases stay exact); otherwise an opaque atlas becomes
-//!   a JPEG at the highest quality of a fixed ladder that fits, and an atlas whose alpha matters
-//!   stays PNG. When nothing fits, the side shrinks by the square root of the overshoot (bytes
+//! - **Budget.** The atlas is cropped to the packed extent. An opaque atlas is a (fast) PNG
+//!   when that fits `max_bytes` and is no larger than a quality-80 JPEG (flat patches and small
+//!   atlases stay exact), otherwise the JPEG at the highest quality of a fixed ladder that fits;
+//!   with `lossless`, a PNG that fits is always kept. An atlas whose alpha matters stays PNG. When nothing fits, the side shrinks by the square root of the overshoot (bytes
 //!   grow with the texel count) and the charts are re-packed and re-baked, never resampled from
 //!   the baked atlas, so gutters stay intact.
 //!
