@@ -471,27 +471,39 @@ impl Merger {
 
     /// The merged index of material `m` of `model`, adding it (and its texture) if new.
     fn material(&mut self, model: u64, m: usize, from: &InstancedMesh) -> Option<usize> {
-        if let Some(&i) = self.materials.get(&(model, m)) {
+        self.share_material((model, m), m, |t| (model, t), from)
+    }
+
+    /// The merged index of the material with source `key`, found at index `local` of `from`;
+    /// added (with its texture, shared under `texture_key` of its index in `from`) if new.
+    fn share_material(
+        &mut self,
+        key: (u64, usize),
+        local: usize,
+        texture_key: impl FnOnce(usize) -> (u64, usize),
+        from: &InstancedMesh,
+    ) -> Option<usize> {
+        if let Some(&i) = self.materials.get(&key) {
             return Some(i);
         }
-        let mut material: Material = from.materials.get(m)?.clone();
+        let mut material: Material = from.materials.get(local)?.clone();
         if let Some(t) = material.base_color_texture.as_mut() {
-            let key = (model, t.texture);
-            let index = match self.textures.get(&key) {
+            let tkey = texture_key(t.texture);
+            let index = match self.textures.get(&tkey) {
                 Some(&i) => i,
                 None => {
                     let texture = from.textures.get(t.texture)?.clone();
                     self.mesh.textures.push(texture);
-                    self.textures.insert(key, self.mesh.textures.len() - 1);
+                    self.textures.insert(tkey, self.mesh.textures.len() - 1);
                     self.mesh.textures.len() - 1
                 }
             };
             t.texture = index;
         }
         self.mesh.materials.push(material);
-        self.material_keys.push((model, m));
+        self.material_keys.push(key);
         let i = self.mesh.materials.len() - 1;
-        self.materials.insert((model, m), i);
+        self.materials.insert(key, i);
         Some(i)
     }
 
@@ -502,7 +514,10 @@ impl Merger {
             let mut sub = sub.clone();
             sub.material = sub.material.and_then(|m| {
                 let (model, source_m) = *part.material_keys.get(m)?;
-                self.material_with_local(model, source_m, m, &part.mesh)
+                // The part's textures have no provenance of their own: they are shared under
+                // the (model, material) of their first user.
+                let texture_key = (model, usize::MAX - source_m);
+                self.share_material((model, source_m), m, |_| texture_key, &part.mesh)
             });
             self.mesh.submeshes.push(sub);
         }
@@ -512,38 +527,5 @@ impl Merger {
                 transform: inst.transform,
             });
         }
-    }
-
-    /// Like [`Merger::material`] for a material already copied into `from` as `local`.
-    fn material_with_local(
-        &mut self,
-        model: u64,
-        source_m: usize,
-        local: usize,
-        from: &InstancedMesh,
-    ) -> Option<usize> {
-        if let Some(&i) = self.materials.get(&(model, source_m)) {
-            return Some(i);
-        }
-        let mut material = from.materials.get(local)?.clone();
-        if let Some(t) = material.base_color_texture.as_mut() {
-            // Textures of an expanded part are keyed by (model, material) of their first user.
-            let key = (model, usize::MAX - source_m);
-            let index = match self.textures.get(&key) {
-                Some(&i) => i,
-                None => {
-                    let texture = from.textures.get(t.texture)?.clone();
-                    self.mesh.textures.push(texture);
-                    self.textures.insert(key, self.mesh.textures.len() - 1);
-                    self.mesh.textures.len() - 1
-                }
-            };
-            t.texture = index;
-        }
-        self.mesh.materials.push(material);
-        self.material_keys.push((model, source_m));
-        let i = self.mesh.materials.len() - 1;
-        self.materials.insert((model, source_m), i);
-        Some(i)
     }
 }

@@ -187,28 +187,6 @@ impl WorldDir {
     }
 }
 
-/// The FNV-1a 128-bit hash of `bytes` as 32 hex digits: a well-known, stable, dependency-free
-/// content address. It guards against accidental collisions only; a store of untrusted
-/// uploads would want a cryptographic hash.
-pub fn content_hash(bytes: &[u8]) -> String {
-    const OFFSET: u128 = 0x6c62_272e_07bb_0142_62b8_2175_6295_c58d;
-    const PRIME: u128 = 0x0000_0000_0100_0000_0000_0000_0000_013b;
-    let mut h = OFFSET;
-    for &b in bytes {
-        h ^= u128::from(b);
-        h = h.wrapping_mul(PRIME);
-    }
-    format!("{h:032x}")
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn fnv1a_128_matches_reference_values() {
-        // Reference values of FNV-1a 128 (IETF draft-eastlake-fnv test vectors).
-        assert_eq!(content_hash(b""), "6c62272e07bb014262b821756295c58d");
-        assert_eq!(content_hash(b"a"), "d228cb696f1a8caf78912b704e4a8964");
-    }
-}
+/// The content address of a model: FNV-1a 128 as 32 hex digits (shared with the aggregate
+/// store, `horizon_aggregate::store::content_hash`).
+pub use horizon_aggregate::store::content_hash;
