@@ -104,7 +104,11 @@ pub fn build_aggregates(
     let mut known = store.known()?;
     if options.aggregate.method == Method::Unoptimized {
         // Baseline handoffs are not persisted: reuse all of a matching build or nothing.
-        let complete = store.manifest()?.is_some_and(|m| m.root_key == root_key);
+        let complete = store
+            .manifest()
+            .ok()
+            .flatten()
+            .is_some_and(|m| m.root_key == root_key);
         if !complete {
             known.clear();
         }

@@ -116,13 +116,18 @@ impl AggregateStore {
     }
 
     /// Every aggregate this store knows by key: the manifest's, then the journal's (later
-    /// lines win), keeping only those whose files exist.
+    /// lines win), keeping only those whose files exist. A manifest that does not parse is
+    /// skipped (the next build replaces it), so a damaged file never blocks a rebuild.
     pub fn known(&self) -> Result<HashMap<String, AggregateEntry>, AggregateError> {
         let mut out = HashMap::new();
-        if let Some(m) = self.manifest()? {
-            for e in m.nodes.into_values() {
-                out.insert(e.key.clone(), e);
+        match self.manifest() {
+            Ok(Some(m)) => {
+                for e in m.nodes.into_values() {
+                    out.insert(e.key.clone(), e);
+                }
             }
+            Ok(None) | Err(AggregateError::Corrupt { .. }) => {}
+            Err(e) => return Err(e),
         }
         let path = self.journal_path();
         match std::fs::read_to_string(&path) {

@@ -340,3 +340,28 @@ fn adding_objects_rebuilds_only_their_ancestors() {
     assert!(report.built < bvh.node_count());
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn a_damaged_manifest_does_not_block_the_next_build() {
+    let w = world();
+    let bvh = tree(&w);
+    let dir = temp("damaged");
+    let store = AggregateStore::new(&dir);
+    build_aggregates(&bvh, &w.models, &store, &options(&w), &|_| {}).expect("first build");
+    std::fs::write(store.manifest_path(), b"{ not json").expect("damage");
+    assert!(store.manifest().is_err());
+    let report = build_aggregates(&bvh, &w.models, &store, &options(&w), &|_| {}).expect("rebuild");
+    // Everything comes back from the journal, nothing is rebuilt, and the manifest is whole.
+    assert_eq!(report.built, 0);
+    assert_eq!(report.reused, bvh.node_count());
+    assert_eq!(
+        store
+            .manifest()
+            .expect("read")
+            .expect("manifest")
+            .nodes
+            .len(),
+        bvh.node_count()
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
