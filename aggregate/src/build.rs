@@ -77,8 +77,7 @@ pub struct BuildReport {
     pub atlas: bool,
     /// Wall time.
     pub seconds: f64,
-    /// Nodes rebuilt that are not ancestors of... (filled by callers that know the change
-    /// set; 0 otherwise).
+    /// Levels of the tree.
     pub levels: usize,
 }
 

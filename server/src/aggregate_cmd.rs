@@ -233,14 +233,22 @@ pub fn report(
     let base = base_store
         .manifest()?
         .context("baseline build wrote no manifest")?;
-    drop(models);
-
-    // Assets: models by BVH number, aggregates by node.
+    // Assets: models by BVH number (counted from the models already loaded for the
+    // baseline, not read again), aggregates by node.
     let model_assets: Vec<Asset> = manifest
         .models
         .iter()
-        .map(|m| model_asset(&world, &m.hash, m.bytes))
+        .enumerate()
+        .map(|(i, m)| -> anyhow::Result<Asset> {
+            let mesh = &horizon_aggregate::ModelSource::model(&models, i as u64)?.mesh;
+            Ok(Asset {
+                bytes: m.bytes,
+                draws: mesh.submeshes.len() as u64,
+                textures: mesh.textures.len() as u64,
+            })
+        })
         .collect::<anyhow::Result<_>>()?;
+    drop(models);
     let naive_bytes: u64 = manifest.models.iter().map(|m| m.bytes).sum();
     let aggregate_assets = |m: &AggregateManifest| -> HashMap<u32, (String, Asset)> {
         m.nodes
@@ -353,19 +361,6 @@ fn print_report(dir: &Path, r: &Report) {
         r.entries_mean,
         r.aggregates_mean
     );
-}
-
-/// Draw calls and textures of one model file (its submeshes and textures).
-fn model_asset(world: &WorldDir, hash: &str, bytes: u64) -> anyhow::Result<Asset> {
-    let path = world.model(hash);
-    let mesh = import_file(&path, &ImportOptions::trusted())
-        .with_context(|| format!("cannot load {}", path.display()))?
-        .mesh;
-    Ok(Asset {
-        bytes,
-        draws: mesh.submeshes.len() as u64,
-        textures: mesh.textures.len() as u64,
-    })
 }
 
 /// The join download of one cut: unique assets' bytes and textures; draw calls per entry.
