@@ -75,6 +75,7 @@ impl Bvh {
     /// Rebuilds the hierarchy over the current objects (section 4.3: "every few hours, the
     /// system reconstructs the BVH"). Object ids are kept; node ids are all new.
     pub fn rebuild(&mut self) {
+        self.touch();
         // The live objects, in id order.
         let mut ids: Vec<u32> = (0..self.objects.leaf.len() as u32)
             .filter(|&o| self.objects.is_live(o))

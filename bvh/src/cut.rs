@@ -92,7 +92,14 @@ pub struct Cut {
 /// buffers have grown.
 #[derive(Debug, Default)]
 pub struct CutWorkspace {
-    heap: BinaryHeap<Candidate>,
+    pub(crate) heap: BinaryHeap<Candidate>,
+    /// The nodes the last query refined, in order.
+    pub(crate) refined: Vec<u32>,
+    /// Their refinement-order keys ([`order_key`]).
+    pub(crate) refined_keys: Vec<u64>,
+    /// How many nodes were refined when the budget first kept a node from refining, or
+    /// `None` if the budget did not bind.
+    pub(crate) skipped_at: Option<usize>,
 }
 
 impl CutWorkspace {
@@ -114,18 +121,46 @@ impl Bvh {
     pub fn cut_into(&self, query: &CutQuery, workspace: &mut CutWorkspace, out: &mut Cut) {
         out.entries.clear();
         out.nodes_visited = 0;
-        let heap = &mut workspace.heap;
-        heap.clear();
+        workspace.heap.clear();
+        workspace.refined.clear();
+        workspace.refined_keys.clear();
+        workspace.skipped_at = None;
         if self.is_empty() {
             return;
         }
+        // Start from the root alone.
+        workspace
+            .heap
+            .push(self.candidate(query.position, self.root));
+        out.nodes_visited = 1;
+        self.refine_best_first(query, workspace, 1, out);
+    }
+
+    /// The best-first refinement, continued from a partial cut: `workspace.heap` holds its
+    /// unrefined nodes that may still be refined, `out.entries` the rest of it, and `size`
+    /// counts both. Appends every node it refines to `workspace.refined` (and its key to
+    /// `refined_keys`).
+    ///
+    /// Seeded with the root alone this is the whole query. Seeded with the frontier of any
+    /// cut that refines exactly the nodes whose [`order_key`] is at least some key, if that
+    /// cut fits the budget, it gives the same result: the best-first order refines every
+    /// node of such a cut before any other, and none of them can be kept for the budget
+    /// (`StandingQuery` relies on this).
+    pub(crate) fn refine_best_first(
+        &self,
+        query: &CutQuery,
+        workspace: &mut CutWorkspace,
+        mut size: usize,
+        out: &mut Cut,
+    ) {
         let max_results = query.max_results.max(1);
         let viewer = query.position;
-        // Start from the root alone.
-        heap.push(self.candidate(viewer, self.root));
-        out.nodes_visited = 1;
-        // `size` counts the cut's entries: in the heap, emitted objects and kept aggregates.
-        let mut size = 1usize;
+        let CutWorkspace {
+            heap,
+            refined,
+            refined_keys,
+            skipped_at,
+        } = workspace;
         // Once no refinement can fit, stop popping: every node but the root (which may have
         // one child) has at least `min_children`.
         let smallest_growth = self.options.min_children.saturating_sub(1);
@@ -143,12 +178,15 @@ impl Bvh {
                 // Refining would exceed the budget: it stays as an aggregate.
                 out.entries
                     .push(self.aggregate(top.node, node, top.solid_angle));
+                skipped_at.get_or_insert(refined.len());
                 if smallest_growth > 0 && size + smallest_growth > max_results {
                     break;
                 }
                 continue;
             }
             size += len - 1;
+            refined.push(top.node);
+            refined_keys.push(top.key());
             let kids = self.kids(top.node);
             match node.kind {
                 NodeKind::Leaf => {
@@ -213,9 +251,27 @@ pub(crate) struct Candidate {
     pub(crate) node: u32,
 }
 
+impl Candidate {
+    /// Its [`order_key`].
+    #[inline]
+    pub(crate) fn key(&self) -> u64 {
+        order_key(self.solid_angle, self.node)
+    }
+}
+
+/// The best-first refinement order as one integer: a larger key is refined first. The solid
+/// angle's bits, then the node id reversed (ties go to the smaller id). Solid angles are
+/// never negative, and the bits of non-negative floats (NaN included) order as
+/// `f32::total_cmp` does.
+#[inline]
+pub(crate) fn order_key(solid_angle: f32, node: u32) -> u64 {
+    debug_assert!(solid_angle.is_sign_positive());
+    (u64::from(solid_angle.to_bits()) << 32) | u64::from(u32::MAX - node)
+}
+
 impl PartialEq for Candidate {
     fn eq(&self, other: &Self) -> bool {
-        self.cmp(other) == Ordering::Equal
+        self.key() == other.key()
     }
 }
 
@@ -228,9 +284,8 @@ impl PartialOrd for Candidate {
 }
 
 impl Ord for Candidate {
+    #[inline]
     fn cmp(&self, other: &Self) -> Ordering {
-        self.solid_angle
-            .total_cmp(&other.solid_angle)
-            .then_with(|| other.node.cmp(&self.node))
+        self.key().cmp(&other.key())
     }
 }

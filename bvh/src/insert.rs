@@ -20,6 +20,7 @@ impl Bvh {
     /// Adds an object, descending by eq. 1 and splitting what overflows. O(height * branching *
     /// descriptor length). The tree is unchanged when an error is returned.
     pub fn insert(&mut self, object: &NewObject<'_>) -> Result<ObjectId, BvhError> {
+        self.touch();
         // Refuse bad input before anything changes.
         object.check()?;
         // Store the object, then place it in the hierarchy.

@@ -20,6 +20,7 @@ use glam::Affine3A;
 impl Bvh {
     /// Removes an object. Its id becomes free for reuse.
     pub fn remove(&mut self, id: ObjectId) -> Result<(), BvhError> {
+        self.touch();
         let o = self.live_object(id)?;
         self.unplace(o);
         self.objects.release(o);
@@ -36,6 +37,7 @@ impl Bvh {
         sphere: Sphere,
     ) -> Result<(), BvhError> {
         // Refuse bad input before anything changes.
+        self.touch();
         let o = self.live_object(id)?;
         check_placement(&transform, &sphere)?;
         self.objects.transform[o as usize] = transform;

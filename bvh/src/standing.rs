@@ -30,8 +30,22 @@
 //! heap. Because the walk follows the *current* tree, tree changes (insert, remove, split,
 //! condense, move, rebuild) need no notification: the walk sees the new structure, and the
 //! previous refined set only serves as the hysteresis hint (a node id freed and reused by the
-//! tree merely gets the hint of its predecessor). The deltas are the diff between the previous
-//! and new entries, by item, with a fast hash, so a step costs O(cut size).
+//! tree merely gets the hint of its predecessor).
+//!
+//! While the budget binds, the one-shot best-first cut is computed in two phases. The last
+//! update tells where the budget bound it (the first node it kept for the budget); a
+//! heap-free walk refines every node whose place in the best-first order ([`order_key`]:
+//! solid angle, then id) comes a margin of refinements before that point, and the heap only
+//! continues from the walk's frontier. If such a walk fits the budget, the best-first cut
+//! refines all of its nodes before any other and keeps none of them for the budget, so the
+//! result is the one-shot cut's exactly; if it overflows, the update runs the plain query
+//! and the margin doubles. Only the few nodes near the binding point pass through the heap.
+//!
+//! The deltas: if the tree's [`Bvh::state_stamp`] is the one the last update saw, only the
+//! viewer moved, and the deltas follow from the change of the refined set alone (a node that
+//! became refined trades its entry for its children's, one that stopped being refined the
+//! reverse), in O(refined set), with the unchanged entries untouched. Otherwise they are the
+//! diff between the previous and new entries, by item, with a fast hash: O(cut size).
 //!
 //! # Delta order and meaning
 //! One update's deltas are every [`CutDelta::Add`] first, then every [`CutDelta::Reparent`],
@@ -44,15 +58,15 @@
 //! a coarsening or the tree's restructuring). An object id that the tree frees and reuses for
 //! a new object within one update arrives as a replacing `Add`.
 
-use std::collections::{HashMap, HashSet};
+use std::collections::{BinaryHeap, HashMap, HashSet};
 use std::hash::{BuildHasherDefault, Hasher};
 
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
 
-use crate::cut::{Cut, CutEntry, CutItem, CutQuery, CutWorkspace};
+use crate::cut::{order_key, Candidate, Cut, CutEntry, CutItem, CutQuery, CutWorkspace};
 use crate::solid_angle::worst_case_solid_angle;
-use crate::tree::{Bvh, NodeId, NodeKind, NONE};
+use crate::tree::{Bvh, NodeId, NodeKind, ObjectId};
 
 /// A client's standing cut: create it with [`StandingQuery::new`], then call
 /// [`StandingQuery::update`] after every viewer move or batch of tree changes.
@@ -71,13 +85,31 @@ pub struct StandingQuery {
     stack: Vec<u32>,
     /// Removals, emitted after the adds.
     removals: Vec<CutDelta>,
-    /// For the fallback to the one-shot cut.
+    /// The items an unchanged-tree update removes (scratch).
+    removed: Vec<CutItem>,
+    /// For the budget-bound updates (the one-shot best-first cut).
     workspace: CutWorkspace,
     fallback: Cut,
     /// The last update's cut was limited by the budget: start from the best-first cut.
     budget_bound: bool,
+    /// The threshold of the next budget-bound update's seeding walk: an [`order_key`]
+    /// `margin` refinements before the point where the budget bound the last best-first cut.
+    threshold_key: Option<u64>,
+    /// Refinements the threshold stays before that point: doubled when the walk overflows
+    /// the budget, shrunk while it fits.
+    margin: usize,
+    /// Scratch for choosing the threshold.
+    keys: Vec<u64>,
+    /// The [`Bvh::state_stamp`] of the tree at the last update: while it holds, only the
+    /// viewer moved, and the deltas follow from the change of the refined set alone.
+    tree_stamp: Option<u64>,
     stamp: u32,
 }
+
+/// The margin's range and start (see `StandingQuery::margin`), in refinements.
+const MIN_MARGIN: usize = 8;
+const MAX_MARGIN: usize = 1 << 16;
+const START_MARGIN: usize = 32;
 
 /// The parameters of a standing query.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -131,6 +163,11 @@ pub struct UpdateStats {
     pub nodes_visited: usize,
     /// The budget bound, so the update used the one-shot best-first cut.
     pub fell_back: bool,
+    /// That best-first cut was seeded by a threshold walk that fit the budget (the cheap
+    /// case), rather than computed from the root.
+    pub seeded: bool,
+    /// Nodes the best-first refinement popped from its heap and refined.
+    pub heap_refinements: usize,
 }
 
 /// Applies one update's deltas to a client-side copy of the cut: `Add` inserts or replaces,
@@ -165,9 +202,14 @@ impl StandingQuery {
             fresh: Vec::new(),
             stack: Vec::new(),
             removals: Vec::new(),
+            removed: Vec::new(),
             workspace: CutWorkspace::new(),
             fallback: Cut::default(),
             budget_bound: false,
+            threshold_key: None,
+            margin: START_MARGIN,
+            keys: Vec::new(),
+            tree_stamp: None,
             stamp: 0,
         }
     }
@@ -187,7 +229,8 @@ impl StandingQuery {
         self.entries.is_empty()
     }
 
-    /// The current entries, in no particular order.
+    /// The current entries, in no particular order, each with the solid angle of the update
+    /// that last sent it (as a client holding the deltas has it).
     pub fn entries(&self) -> impl Iterator<Item = &CutEntry> + '_ {
         self.entries.values().map(|slot| &slot.entry)
     }
@@ -196,18 +239,26 @@ impl StandingQuery {
     /// in any way since the last update) and appends the ordered deltas to `deltas`.
     pub fn update(&mut self, bvh: &Bvh, position: Vec3, deltas: &mut Vec<CutDelta>) -> UpdateStats {
         let mut stats = UpdateStats::default();
-        if self.budget_bound || !self.walk(bvh, position, &mut stats) {
+        let walked = !self.budget_bound && self.walk(bvh, position, &mut stats);
+        if !walked {
             stats.fell_back = true;
-            self.best_first(bvh, position);
-            stats.nodes_visited += self.fallback.nodes_visited;
+            self.best_first(bvh, position, &mut stats);
             // A best-first cut that skipped a refinement for the budget ended within
             // `max_children - 1` entries of it; one further away is the plain threshold cut,
             // so the next update can walk again.
             self.budget_bound =
                 self.fresh.len() + bvh.options.max_children > self.options.max_results.max(1) + 1;
+            self.next_refined.clear();
+            self.next_refined
+                .extend(self.workspace.refined.iter().copied());
+        }
+        if self.tree_stamp == Some(bvh.state_stamp()) {
+            self.diff_refined(bvh, position, deltas);
+        } else {
+            self.diff(bvh, deltas);
+            self.tree_stamp = Some(bvh.state_stamp());
         }
         std::mem::swap(&mut self.refined, &mut self.next_refined);
-        self.diff(bvh, deltas);
         stats
     }
 
@@ -252,23 +303,189 @@ impl StandingQuery {
         true
     }
 
-    /// The one-shot best-first cut, and its refined set (the entries' strict ancestors).
-    fn best_first(&mut self, bvh: &Bvh, position: Vec3) {
+    /// The one-shot best-first cut into `fresh`, and its refined nodes into
+    /// `workspace.refined`.
+    ///
+    /// Computed in two phases when the last update told where the budget bound: a heap-free
+    /// walk refines every node whose [`order_key`] is at least a threshold chosen a margin
+    /// before that point, then the best-first refinement continues from the walk's
+    /// frontier. The result is the one-shot cut's, because the best-first order refines
+    /// every node of such a walk before any other and, when the walk fits the budget, keeps
+    /// none of them for it (see `Bvh::refine_best_first`). Only the nodes near the binding
+    /// point pass through the heap. A walk that overflows the budget is dropped for the
+    /// plain query, and the margin doubles.
+    fn best_first(&mut self, bvh: &Bvh, position: Vec3, stats: &mut UpdateStats) {
         let query = CutQuery {
             position,
             min_solid_angle: self.options.min_solid_angle,
             max_results: self.options.max_results,
         };
-        bvh.cut_into(&query, &mut self.workspace, &mut self.fallback);
-        self.fresh.clear();
-        self.fresh.extend_from_slice(&self.fallback.entries);
-        self.next_refined.clear();
-        for entry in &self.fallback.entries {
-            let mut up = entry.parent.map_or(NONE, |p| p.0);
-            while up != NONE && self.next_refined.insert(up) {
-                up = bvh.nodes[up as usize].parent;
+        let seeded = match self.threshold_key {
+            Some(key) if !bvh.is_empty() => self.threshold_seed(bvh, &query, key),
+            _ => None,
+        };
+        match seeded {
+            Some(size) => {
+                stats.seeded = true;
+                let walked = self.workspace.refined.len();
+                bvh.refine_best_first(&query, &mut self.workspace, size, &mut self.fallback);
+                stats.heap_refinements = self.workspace.refined.len() - walked;
+                self.margin = (self.margin - self.margin / 8).max(MIN_MARGIN);
+            }
+            None => {
+                if self.threshold_key.is_some() {
+                    self.margin = (self.margin * 2).min(MAX_MARGIN);
+                }
+                bvh.cut_into(&query, &mut self.workspace, &mut self.fallback);
+                stats.heap_refinements = self.workspace.refined.len();
             }
         }
+        self.threshold_key = self.next_threshold();
+        stats.nodes_visited += self.fallback.nodes_visited;
+        std::mem::swap(&mut self.fresh, &mut self.fallback.entries);
+    }
+
+    /// The key `margin` refinements before the first node the budget kept from refining
+    /// (the `margin + 1`-th smallest key refined before it), or `None` if the budget did not
+    /// bind that late.
+    fn next_threshold(&mut self) -> Option<u64> {
+        let skipped_at = self.workspace.skipped_at?;
+        if skipped_at <= self.margin {
+            return None;
+        }
+        self.keys.clear();
+        self.keys
+            .extend_from_slice(&self.workspace.refined_keys[..skipped_at]);
+        Some(*self.keys.select_nth_unstable(self.margin).1)
+    }
+
+    /// The cut refining exactly the nodes whose [`order_key`] is at least `threshold`, as a
+    /// seed for the best-first refinement: objects and nodes below `Omega_min` into
+    /// `fallback.entries`, the other unrefined nodes into the workspace heap, the refined
+    /// nodes into `workspace.refined`. Returns the cut's size, or `None` if it would exceed
+    /// the budget.
+    fn threshold_seed(&mut self, bvh: &Bvh, query: &CutQuery, threshold: u64) -> Option<usize> {
+        let viewer = query.position;
+        let budget = query.max_results.max(1);
+        let out = &mut self.fallback;
+        out.entries.clear();
+        out.nodes_visited = 1;
+        let ws = &mut self.workspace;
+        ws.refined.clear();
+        ws.refined_keys.clear();
+        ws.skipped_at = None;
+        let mut frontier = std::mem::take(&mut ws.heap).into_vec();
+        frontier.clear();
+        self.stack.clear();
+        self.stack.push(bvh.root);
+        let mut size = 1usize;
+        let mut fits = true;
+        while let Some(n) = self.stack.pop() {
+            let node = &bvh.nodes[n as usize];
+            let solid_angle = worst_case_solid_angle(viewer, node.centre, node.radius, node.r_max);
+            let key = order_key(solid_angle, n);
+            if key < threshold {
+                if solid_angle < query.min_solid_angle {
+                    out.entries.push(bvh.aggregate(n, node, solid_angle));
+                } else {
+                    frontier.push(Candidate {
+                        solid_angle,
+                        node: n,
+                    });
+                }
+                continue;
+            }
+            size += node.len as usize - 1;
+            if size > budget {
+                fits = false;
+                break;
+            }
+            ws.refined.push(n);
+            ws.refined_keys.push(key);
+            let kids = bvh.kids(n);
+            match node.kind {
+                NodeKind::Leaf => {
+                    for &o in kids {
+                        out.entries.push(bvh.object_entry(viewer, o, n));
+                    }
+                }
+                _ => {
+                    out.nodes_visited += kids.len();
+                    self.stack.extend_from_slice(kids);
+                }
+            }
+        }
+        // Heapify the frontier in linear time.
+        ws.heap = BinaryHeap::from(frontier);
+        fits.then_some(size)
+    }
+
+    /// The deltas when the tree is the one the last update saw: only the refined set changed
+    /// (from `refined` to `next_refined`, both closed under ancestors), so only the entries
+    /// next to a node that changed sides change. A newly refined node drops its own entry (if
+    /// it had one: it may have been several levels below the old cut) for those of its
+    /// children that stay unrefined, or of its objects; a node no longer refined regains its
+    /// entry (if its parent stays refined) and drops its children's. O(refined set), not
+    /// O(cut): the unchanged entries keep the solid angle they were sent with.
+    fn diff_refined(&mut self, bvh: &Bvh, viewer: Vec3, deltas: &mut Vec<CutDelta>) {
+        let root = bvh.root;
+        let (old, new) = (&self.refined, &self.next_refined);
+        let entries = &mut self.entries;
+        let stamp = self.stamp;
+        let mut removals = std::mem::take(&mut self.removed);
+        removals.clear();
+        let mut add = |entry: CutEntry, deltas: &mut Vec<CutDelta>| {
+            deltas.push(CutDelta::Add(entry));
+            entries.insert(entry.item, Slot { entry, stamp });
+        };
+        let has_entry = |n: u32, refined: &FastSet<u32>| {
+            n == root || refined.contains(&bvh.nodes[n as usize].parent)
+        };
+        let aggregate = |n: u32| {
+            let node = &bvh.nodes[n as usize];
+            let solid_angle = worst_case_solid_angle(viewer, node.centre, node.radius, node.r_max);
+            bvh.aggregate(n, node, solid_angle)
+        };
+        for &n in new.iter().filter(|n| !old.contains(n)) {
+            if has_entry(n, old) {
+                removals.push(CutItem::Aggregate(NodeId(n)));
+            }
+            let kids = bvh.kids(n);
+            if bvh.nodes[n as usize].kind == NodeKind::Leaf {
+                for &o in kids {
+                    add(bvh.object_entry(viewer, o, n), deltas);
+                }
+            } else {
+                for &c in kids.iter().filter(|c| !new.contains(c)) {
+                    add(aggregate(c), deltas);
+                }
+            }
+        }
+        for &n in old.iter().filter(|n| !new.contains(n)) {
+            if has_entry(n, new) {
+                add(aggregate(n), deltas);
+            }
+            let kids = bvh.kids(n);
+            if bvh.nodes[n as usize].kind == NodeKind::Leaf {
+                removals.extend(kids.iter().map(|&o| CutItem::Object(ObjectId(o))));
+            } else {
+                removals.extend(
+                    kids.iter()
+                        .filter(|c| !old.contains(c))
+                        .map(|&c| CutItem::Aggregate(NodeId(c))),
+                );
+            }
+        }
+        // The tree is unchanged, so every object is still in the world: all transient.
+        for &item in &removals {
+            let was = self.entries.remove(&item);
+            debug_assert!(was.is_some(), "{item:?} was not in the cut");
+            deltas.push(CutDelta::Remove {
+                item,
+                transient: true,
+            });
+        }
+        self.removed = removals;
     }
 
     /// Diffs `fresh` against `entries`, updating `entries`: adds, reparents, then removes.

@@ -266,6 +266,17 @@ pub struct Bvh {
     pub(crate) free_nodes: Vec<u32>,
     /// The objects.
     pub(crate) objects: Objects,
+    /// Which state of which tree this is: a number no other tree state in this process has
+    /// had, renewed by every change (see [`Bvh::state_stamp`]).
+    #[serde(skip)]
+    pub(crate) stamp: u64,
+}
+
+/// The source of [`Bvh::stamp`]s.
+static NEXT_STAMP: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
+
+fn fresh_stamp() -> u64 {
+    NEXT_STAMP.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
 }
 
 /// The serialised form of [`Bvh`], validated before it becomes one.
@@ -296,6 +307,7 @@ impl TryFrom<BvhData> for Bvh {
             texture_sum: d.texture_sum,
             free_nodes: d.free_nodes,
             objects: d.objects,
+            stamp: fresh_stamp(),
         };
         bvh.validate()?;
         Ok(bvh)
@@ -329,9 +341,23 @@ impl Bvh {
             texture_sum: Vec::new(),
             free_nodes: Vec::new(),
             objects: Objects::default(),
+            stamp: fresh_stamp(),
         };
         bvh.root = bvh.alloc_node(NodeKind::Leaf, NONE);
         Ok(bvh)
+    }
+
+    /// A number that changes whenever the tree may have changed (an insert, remove, move or
+    /// rebuild, even one that failed) and that no other tree in this process shares unless it
+    /// is an unchanged clone. Equal stamps mean equal trees, so a standing query can tell
+    /// that only its viewer moved.
+    pub fn state_stamp(&self) -> u64 {
+        self.stamp
+    }
+
+    /// Marks the tree as changed (called first by every operation that may change it).
+    pub(crate) fn touch(&mut self) {
+        self.stamp = fresh_stamp();
     }
 
     /// The options the tree was built with.

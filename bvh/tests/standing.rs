@@ -478,3 +478,98 @@ fn empty_tree_and_emptied_tree() {
     );
     assert!(sq.is_empty());
 }
+
+/// A viewer walking 1 m steps through 3,000 objects with a budget that binds at every step:
+/// after the first update, every budget-bound update is seeded by the heap-free threshold
+/// walk (the margin adapts when it overflows), only a few nodes pass through the heap, and
+/// every cut still equals the one-shot best-first cut, on a bulk-built and an incrementally
+/// built tree.
+#[test]
+fn budget_bound_walk_is_seeded_and_equals_the_one_shot_cut() {
+    let objects = world(11, 3_000);
+    let options = BvhOptions::default();
+    let new: Vec<_> = objects.iter().map(Obj::as_new).collect();
+    let bulk = Bvh::bulk_build(options.clone(), &new).expect("valid");
+    let mut incremental = Bvh::new(options).expect("valid");
+    insert_all(&mut incremental, &objects);
+    for bvh in [&bulk, &incremental] {
+        let standing = StandingOptions {
+            min_solid_angle: 1e-5,
+            max_results: 400,
+            hysteresis: 0.1,
+        };
+        let mut sq = StandingQuery::new(standing);
+        let mut client = HashMap::new();
+        let mut deltas = Vec::new();
+        let mut viewer = Vec3::new(20.0, 30.0, 2.0);
+        let (mut bound, mut seeded, mut through_heap, mut refined) = (0, 0, 0, 0);
+        for step in 0..150 {
+            deltas.clear();
+            let stats = sq.update(bvh, viewer, &mut deltas);
+            check_deltas(bvh, &deltas);
+            apply_deltas(&mut client, &deltas);
+            let query = CutQuery {
+                position: viewer,
+                min_solid_angle: standing.min_solid_angle,
+                max_results: standing.max_results,
+            };
+            let fresh = bvh.cut(&query);
+            assert_eq!(
+                view(client.values()),
+                view(fresh.entries.iter()),
+                "step {step}"
+            );
+            assert_eq!(
+                view(sq.entries()),
+                view(fresh.entries.iter()),
+                "step {step}"
+            );
+            if step > 0 {
+                bound += usize::from(stats.fell_back);
+                seeded += usize::from(stats.seeded);
+                through_heap += stats.heap_refinements;
+                refined += refined_set(bvh, &fresh.entries).len();
+            }
+            viewer += Vec3::new(0.8, 0.6, 0.0);
+        }
+        assert_eq!(bound, 149, "the budget binds at every step");
+        assert!(
+            seeded >= 140,
+            "{seeded} of {bound} budget-bound updates seeded"
+        );
+        assert!(
+            through_heap * 4 < refined,
+            "{through_heap} of {refined} refinements through the heap"
+        );
+    }
+}
+
+/// The tree's state stamp changes with every change and is shared only by unchanged clones.
+#[test]
+fn state_stamp_tracks_changes() {
+    let mut bvh = Bvh::new(BvhOptions::default()).expect("valid");
+    let empty = bvh.state_stamp();
+    let id = bvh
+        .insert(&object(Vec3::ZERO, 1.0, 0).as_new())
+        .expect("valid");
+    let inserted = bvh.state_stamp();
+    assert_ne!(empty, inserted);
+    let clone = bvh.clone();
+    assert_eq!(clone.state_stamp(), inserted);
+    bvh.move_object(
+        id,
+        Affine3A::from_translation(Vec3::X),
+        Sphere::new(Vec3::X, 1.0),
+    )
+    .expect("valid move");
+    assert_ne!(bvh.state_stamp(), inserted);
+    assert_eq!(clone.state_stamp(), inserted);
+    let moved = bvh.state_stamp();
+    bvh.rebuild();
+    assert_ne!(bvh.state_stamp(), moved);
+    let rebuilt = bvh.state_stamp();
+    bvh.remove(id).expect("live");
+    assert_ne!(bvh.state_stamp(), rebuilt);
+    let other = Bvh::new(BvhOptions::default()).expect("valid");
+    assert_ne!(other.state_stamp(), empty);
+}

@@ -125,6 +125,10 @@ struct StandingStats {
     deltas_max: f64,
     nodes_visited_median: f64,
     fallbacks: usize,
+    /// Budget-bound updates whose best-first cut was seeded by a threshold walk.
+    seeded: usize,
+    /// Median nodes refined through the best-first heap per update.
+    heap_refinements_median: f64,
     final_cut_size: usize,
 }
 
@@ -534,6 +538,8 @@ fn standing_stats(tree: &str, bvh: &Bvh, bounds: &Aabb, args: &BenchArgs) -> Sta
     standing.update(bvh, position, &mut deltas);
     let (mut times, mut changes, mut visited) = (Vec::new(), Vec::new(), Vec::new());
     let mut fallbacks = 0;
+    let mut seeded = 0;
+    let mut heap_refinements = Vec::new();
     for _ in 0..args.steps {
         heading += rng.range(-0.05, 0.05);
         let mut step = Vec3::new(heading.cos(), 0.0, heading.sin());
@@ -554,6 +560,8 @@ fn standing_stats(tree: &str, bvh: &Bvh, bounds: &Aabb, args: &BenchArgs) -> Sta
         changes.push(deltas.len() as f64);
         visited.push(stats.nodes_visited as f64);
         fallbacks += usize::from(stats.fell_back);
+        seeded += usize::from(stats.seeded);
+        heap_refinements.push(stats.heap_refinements as f64);
     }
     StandingStats {
         tree: tree.to_owned(),
@@ -566,6 +574,8 @@ fn standing_stats(tree: &str, bvh: &Bvh, bounds: &Aabb, args: &BenchArgs) -> Sta
         deltas_max: percentile(&mut changes, 1.0),
         nodes_visited_median: percentile(&mut visited, 0.5),
         fallbacks,
+        seeded,
+        heap_refinements_median: percentile(&mut heap_refinements, 0.5),
         final_cut_size: standing.len(),
     }
 }
@@ -701,13 +711,14 @@ fn markdown(r: &BenchReport) -> String {
     let _ = writeln!(
         s,
         "| tree | median ms | p99 ms | max ms | deltas/step median | mean | max | nodes \
-         visited median | budget fallbacks | final cut size |"
+         visited median | budget-bound updates | seeded by a threshold walk | heap \
+         refinements median | final cut size |"
     );
-    let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|---|");
+    let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|---|---|---|");
     for t in &r.standing {
         let _ = writeln!(
             s,
-            "| {} | {:.4} | {:.4} | {:.3} | {:.0} | {:.1} | {:.0} | {:.0} | {} | {} |",
+            "| {} | {:.4} | {:.4} | {:.3} | {:.0} | {:.1} | {:.0} | {:.0} | {} | {} | {:.0} | {} |",
             t.tree,
             t.median_ms,
             t.p99_ms,
@@ -717,6 +728,8 @@ fn markdown(r: &BenchReport) -> String {
             t.deltas_max,
             t.nodes_visited_median,
             t.fallbacks,
+            t.seeded,
+            t.heap_refinements_median,
             t.final_cut_size
         );
     }
