@@ -79,6 +79,21 @@ pub struct BuildReport {
     pub seconds: f64,
     /// Levels of the tree.
     pub levels: usize,
+    /// Per level, root first: aggregates built and the wall time spent on the level.
+    pub level_times: Vec<LevelTime>,
+}
+
+/// One tree level of a rebuild.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct LevelTime {
+    /// Depth (0 for the root).
+    pub depth: usize,
+    /// Nodes on the level.
+    pub nodes: usize,
+    /// Aggregates built on it (the rest were reused).
+    pub built: usize,
+    /// Wall time of the level.
+    pub seconds: f64,
 }
 
 /// Builds (or reuses) the aggregate of every node of `bvh` into `store`.
@@ -126,7 +141,8 @@ pub fn build_aggregates(
     };
     let failed: Mutex<Vec<(u32, String)>> = Mutex::new(Vec::new());
     let mut below: HashMap<NodeId, Arc<Handoff>> = HashMap::new();
-    for level in levels.iter().rev() {
+    for (depth, level) in levels.iter().enumerate().rev() {
+        let level_start = Instant::now();
         let results: Vec<LevelResult> = level
             .par_iter()
             .map(|&node| {
@@ -176,7 +192,13 @@ pub fn build_aggregates(
             })
             .collect::<Result<_, AggregateError>>()?;
         let mut next = HashMap::new();
+        let mut level_time = LevelTime {
+            depth,
+            nodes: level.len(),
+            ..LevelTime::default()
+        };
         for (node, entry, handoff, built) in results {
+            level_time.built += usize::from(built);
             if let Some(e) = entry {
                 if built {
                     report.built += 1;
@@ -192,7 +214,10 @@ pub fn build_aggregates(
             }
         }
         below = next;
+        level_time.seconds = level_start.elapsed().as_secs_f64();
+        report.level_times.push(level_time);
     }
+    report.level_times.reverse();
     report.failed = failed.into_inner().unwrap_or_default();
     report.failed.sort();
     // Stage 4: the manifest, last.

@@ -27,8 +27,8 @@ mod source;
 pub mod store;
 
 pub use build::{
-    build_aggregates, levels, node_keys, resolve_atlas, BuildOptions, BuildReport, Progress,
-    AUTO_ATLAS_BYTES, AUTO_ATLAS_TEXTURES,
+    build_aggregates, levels, node_keys, resolve_atlas, BuildOptions, BuildReport, LevelTime,
+    Progress, AUTO_ATLAS_BYTES, AUTO_ATLAS_TEXTURES,
 };
 pub use error::AggregateError;
 pub use generate::{generate, ExpandedPart, Handoff, NodeInput, NodeOutput, NodeStats, Placement};

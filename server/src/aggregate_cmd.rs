@@ -587,5 +587,14 @@ fn bench_markdown(r: &AggregateBench) -> String {
         r.full.failed.len(),
         verdict(r.full.failed.is_empty())
     );
+    s += "\n## Time per tree level\n\nRoot first. Built: aggregates built on the level (the \
+          incremental rebuild reuses the rest).\n\n| depth | nodes | full: built | full: seconds \
+          | incremental: built | incremental: seconds |\n|---|---|---|---|---|---|\n";
+    for (f, i) in r.full.level_times.iter().zip(&r.incremental.level_times) {
+        s += &format!(
+            "| {} | {} | {} | {:.2} | {} | {:.2} |\n",
+            f.depth, f.nodes, f.built, f.seconds, i.built, i.seconds
+        );
+    }
     s
 }
