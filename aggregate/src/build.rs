@@ -24,7 +24,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::budget::Display;
 use crate::error::AggregateError;
-use crate::generate::{generate, Handoff, NodeInput, PartKey, Placement};
+use crate::generate::{generate, ExpandedPart, Handoff, NodeInput, PartKey, Placement};
 use crate::options::{AggregateOptions, AtlasPolicy, Method};
 use crate::source::ModelSource;
 use crate::store::{AggregateEntry, AggregateManifest, AggregateStore, KeyHasher, PartList};
@@ -140,7 +140,11 @@ pub fn build_aggregates(
         ..BuildReport::default()
     };
     let failed: Mutex<Vec<(u32, String)>> = Mutex::new(Vec::new());
+    // The level just built: its handoffs in memory (the optimised versions, which share the
+    // source submeshes), and its entries, through which the baseline's handoffs (whole
+    // world-space meshes, too large to hold a level of) are read back from their parts files.
     let mut below: HashMap<NodeId, Arc<Handoff>> = HashMap::new();
+    let mut below_entries: HashMap<NodeId, AggregateEntry> = HashMap::new();
     for (depth, level) in levels.iter().enumerate().rev() {
         let level_start = Instant::now();
         let results: Vec<LevelResult> = level
@@ -160,7 +164,17 @@ pub fn build_aggregates(
                         return Err(AggregateError::Interrupted(limit));
                     }
                 }
-                let children = child_handoffs(bvh, node, &below, &known, &keys, store, models);
+                let children = child_handoffs(
+                    bvh,
+                    node,
+                    &below,
+                    &below_entries,
+                    &known,
+                    &keys,
+                    store,
+                    models,
+                    options.aggregate.method,
+                );
                 let input = node_input(bvh, node, children, &options.aggregate, atlas)?;
                 let outcome =
                     generate(&input, models, &table, &options.aggregate).and_then(|out| {
@@ -180,7 +194,12 @@ pub fn build_aggregates(
                     total,
                 });
                 match outcome {
-                    Ok((entry, handoff)) => Ok((node, Some(entry), Some(Arc::new(handoff)), true)),
+                    // The baseline's handoffs are read back from their parts files, so a
+                    // level never holds all of them at once.
+                    Ok((entry, handoff)) => {
+                        let keep = matches!(handoff, Handoff::Versions(_));
+                        Ok((node, Some(entry), keep.then(|| Arc::new(handoff)), true))
+                    }
                     Err(e @ AggregateError::Io { .. }) => Err(e),
                     Err(e) => {
                         if let Ok(mut f) = failed.lock() {
@@ -192,6 +211,7 @@ pub fn build_aggregates(
             })
             .collect::<Result<_, AggregateError>>()?;
         let mut next = HashMap::new();
+        let mut next_entries = HashMap::new();
         let mut level_time = LevelTime {
             depth,
             nodes: level.len(),
@@ -207,6 +227,9 @@ pub fn build_aggregates(
                     report.reused += 1;
                 }
                 report.bytes_total += e.stats.bytes as u64;
+                if built {
+                    next_entries.insert(node, e.clone());
+                }
                 entries.insert(node.0, e);
             }
             if let Some(h) = handoff {
@@ -214,6 +237,7 @@ pub fn build_aggregates(
             }
         }
         below = next;
+        below_entries = next_entries;
         level_time.seconds = level_start.elapsed().as_secs_f64();
         report.level_times.push(level_time);
     }
@@ -362,14 +386,17 @@ fn node_input(
 }
 
 /// The handoffs of `node`'s child nodes: built this run, or read back from the store.
+#[allow(clippy::too_many_arguments)]
 fn child_handoffs(
     bvh: &Bvh,
     node: NodeId,
     below: &HashMap<NodeId, Arc<Handoff>>,
+    below_entries: &HashMap<NodeId, AggregateEntry>,
     known: &HashMap<String, AggregateEntry>,
     keys: &HashMap<NodeId, String>,
     store: &AggregateStore,
     models: &dyn ModelSource,
+    method: Method,
 ) -> Vec<Arc<Handoff>> {
     let Some(n) = bvh.node(node) else {
         return Vec::new();
@@ -380,10 +407,10 @@ fn child_handoffs(
     for c in children {
         if let Some(h) = below.get(&c) {
             out.push(h.clone());
-        } else if let Some(h) = keys
+        } else if let Some(h) = below_entries
             .get(&c)
-            .and_then(|k| known.get(k))
-            .and_then(|e| decode_parts(store, e, models))
+            .or_else(|| keys.get(&c).and_then(|k| known.get(k)))
+            .and_then(|e| decode_parts(store, e, models, method))
         {
             out.push(Arc::new(h));
         }
@@ -391,31 +418,65 @@ fn child_handoffs(
     out
 }
 
-/// The parts file of a handoff: every version as one submesh with one identity instance, no
-/// materials (the parent takes materials from the source models), and its (model hash,
-/// submesh) list. `None` for handoffs that are not persisted.
+/// The parts file of a handoff, with no materials (the parent takes materials from the source
+/// models), and its [`PartList`]. Versions: every version as one submesh with one identity
+/// instance, keyed by (model hash, submesh). The baseline's expanded part: its world-space
+/// submeshes and instances as they are, each submesh keyed by its material's (model hash,
+/// material index).
 fn encode_parts(
     node: u32,
     handoff: &Handoff,
     models: &dyn ModelSource,
 ) -> Result<Option<(Vec<u8>, PartList)>, AggregateError> {
-    let Handoff::Versions(versions) = handoff else {
-        return Ok(None);
+    let (mesh, keys) = match handoff {
+        Handoff::Versions(versions) => {
+            let mut mesh = InstancedMesh::default();
+            let mut keys = Vec::new();
+            for (&(model, s), sub) in versions {
+                let hash = models.model(model)?.hash.clone();
+                mesh.instances.push(Instance {
+                    submesh: mesh.submeshes.len(),
+                    transform: glam::Affine3A::IDENTITY,
+                });
+                mesh.submeshes.push(Submesh {
+                    material: None,
+                    ..(**sub).clone()
+                });
+                keys.push((hash, s));
+            }
+            (mesh, keys)
+        }
+        Handoff::Expanded(part) => {
+            let mut keys = Vec::new();
+            for sub in &part.mesh.submeshes {
+                keys.push(match sub.material.and_then(|m| part.material_keys.get(m)) {
+                    Some(&(model, m)) => {
+                        let index = u32::try_from(m).map_err(|_| AggregateError::Glb {
+                            node,
+                            reason: format!("material index {m} out of range"),
+                        })?;
+                        (models.model(model)?.hash.clone(), index)
+                    }
+                    None => (String::new(), u32::MAX),
+                });
+            }
+            let mesh = InstancedMesh {
+                submeshes: part
+                    .mesh
+                    .submeshes
+                    .iter()
+                    .map(|sub| Submesh {
+                        material: None,
+                        ..sub.clone()
+                    })
+                    .collect(),
+                instances: part.mesh.instances.clone(),
+                materials: Vec::new(),
+                textures: Vec::new(),
+            };
+            (mesh, keys)
+        }
     };
-    let mut mesh = InstancedMesh::default();
-    let mut keys = Vec::new();
-    for (&(model, s), sub) in versions {
-        let hash = models.model(model)?.hash.clone();
-        mesh.instances.push(Instance {
-            submesh: mesh.submeshes.len(),
-            transform: glam::Affine3A::IDENTITY,
-        });
-        mesh.submeshes.push(Submesh {
-            material: None,
-            ..(**sub).clone()
-        });
-        keys.push((hash, s));
-    }
     let bytes = export_glb(&mesh, &ExportOptions::plain()).map_err(|e| AggregateError::Glb {
         node,
         reason: e.to_string(),
@@ -424,11 +485,13 @@ fn encode_parts(
 }
 
 /// Reads a handoff back from its parts file; `None` if it is missing or does not match its
-/// entry (the parent then falls back to the source models).
+/// entry (the parent then falls back to the source models, or, for the baseline, goes
+/// without the child).
 fn decode_parts(
     store: &AggregateStore,
     entry: &AggregateEntry,
     models: &dyn ModelSource,
+    method: Method,
 ) -> Option<Handoff> {
     let hash = entry.parts.as_ref()?;
     let bytes = std::fs::read(store.parts(hash)).ok()?;
@@ -437,6 +500,32 @@ fn decode_parts(
         .mesh;
     if mesh.submeshes.len() != entry.part_keys.len() {
         return None;
+    }
+    if method == Method::Unoptimized {
+        let mut material_keys: Vec<(u64, usize)> = Vec::new();
+        let mut index: HashMap<(u64, usize), usize> = HashMap::new();
+        let mut submeshes = Vec::with_capacity(mesh.submeshes.len());
+        for (sub, (hash, m)) in mesh.submeshes.into_iter().zip(&entry.part_keys) {
+            let material = if hash.is_empty() {
+                None
+            } else {
+                let key = (models.by_hash(hash)?, *m as usize);
+                Some(*index.entry(key).or_insert_with(|| {
+                    material_keys.push(key);
+                    material_keys.len() - 1
+                }))
+            };
+            submeshes.push(Submesh { material, ..sub });
+        }
+        return Some(Handoff::Expanded(Arc::new(ExpandedPart {
+            mesh: InstancedMesh {
+                submeshes,
+                instances: mesh.instances,
+                materials: Vec::new(),
+                textures: Vec::new(),
+            },
+            material_keys,
+        })));
     }
     let mut versions: BTreeMap<PartKey, Arc<Submesh>> = BTreeMap::new();
     for (sub, (hash, s)) in mesh.submeshes.into_iter().zip(&entry.part_keys) {

@@ -54,7 +54,8 @@ pub enum Handoff {
 /// The unoptimised baseline's handoff: a world-space mesh and where its materials came from.
 #[derive(Clone, Debug)]
 pub struct ExpandedPart {
-    /// Single-instance submeshes in world space.
+    /// Single-instance submeshes in world space, without materials or textures: a submesh's
+    /// material index points into `material_keys`.
     pub mesh: InstancedMesh,
     /// For each material, its source (model, material index).
     pub material_keys: Vec<(u64, usize)>,
@@ -313,7 +314,7 @@ fn generate_unoptimized(
             let Handoff::Expanded(part) = child.as_ref() else {
                 continue;
             };
-            merge.expanded(part);
+            merge.expanded(part, models)?;
         }
     }
     let material_keys = merge.material_keys.clone();
@@ -329,8 +330,15 @@ fn generate_unoptimized(
     stats.error = result.report.error;
     stats.error_pixels = input.display.pixels_of_length(result.report.error);
     let simplified = result.mesh;
+    // The parent takes materials and textures from the source models (`material_keys`):
+    // the handoff keeps geometry only.
     let handoff = Handoff::Expanded(Arc::new(ExpandedPart {
-        mesh: simplified.clone(),
+        mesh: InstancedMesh {
+            submeshes: simplified.submeshes.clone(),
+            instances: simplified.instances.clone(),
+            materials: Vec::new(),
+            textures: Vec::new(),
+        },
         material_keys,
     }));
     let mut out = finish(input.node, simplified, handoff, stats)?;
@@ -507,18 +515,24 @@ impl Merger {
         Some(i)
     }
 
-    /// Appends a child's expanded baseline mesh, sharing materials by source.
-    fn expanded(&mut self, part: &ExpandedPart) {
+    /// Appends a child's expanded baseline mesh, sharing materials by source: each material
+    /// (and its texture) comes from the source model it names, as a leaf takes it, so no
+    /// handoff carries texture bytes.
+    fn expanded(
+        &mut self,
+        part: &ExpandedPart,
+        models: &dyn ModelSource,
+    ) -> Result<(), AggregateError> {
         let base = self.mesh.submeshes.len();
         for sub in &part.mesh.submeshes {
             let mut sub = sub.clone();
-            sub.material = sub.material.and_then(|m| {
-                let (model, source_m) = *part.material_keys.get(m)?;
-                // The part's textures have no provenance of their own: they are shared under
-                // the (model, material) of their first user.
-                let texture_key = (model, usize::MAX - source_m);
-                self.share_material((model, source_m), m, |_| texture_key, &part.mesh)
-            });
+            sub.material = match sub.material.and_then(|m| part.material_keys.get(m)) {
+                Some(&(model, source_m)) => {
+                    let source = models.model(model)?;
+                    self.material(model, source_m, &source.mesh)
+                }
+                None => None,
+            };
             self.mesh.submeshes.push(sub);
         }
         for inst in &part.mesh.instances {
@@ -527,5 +541,6 @@ impl Merger {
                 transform: inst.transform,
             });
         }
+        Ok(())
     }
 }

@@ -25,7 +25,9 @@ use crate::error::AggregateError;
 use crate::generate::NodeStats;
 use crate::options::AggregateOptions;
 
-/// Where each submesh of a parts file came from: (model content hash, submesh index).
+/// Where each submesh of a parts file came from: (model content hash, submesh index) for the
+/// optimised pipeline's versions; (model content hash, material index of that model) for the
+/// unoptimised baseline's world-space submeshes, with an empty hash for none.
 pub type PartList = Vec<(String, u32)>;
 
 /// One node's aggregate, as the manifest and the journal record it.
@@ -37,7 +39,7 @@ pub struct AggregateEntry {
     pub glb: String,
     /// Content hash of the handoff parts, `aggregates/parts/<parts>.glb`, if any.
     pub parts: Option<String>,
-    /// For each submesh of the parts file: the model's content hash and submesh index.
+    /// For each submesh of the parts file: where it came from ([`PartList`]).
     pub part_keys: PartList,
     /// What building it did.
     pub stats: NodeStats,

@@ -9,7 +9,7 @@ use horizon_aggregate::{
     build_aggregates, AggregateError, AggregateOptions, AggregateStore, BuildOptions,
     InMemoryModels, SourceModel,
 };
-use horizon_bvh::{Bvh, BvhOptions, NewObject, Sphere};
+use horizon_bvh::{Bvh, BvhOptions, NewObject, NodeId, Sphere};
 use horizon_descriptors::{describe, DescriptorOptions};
 use horizon_mesh::{
     import_bytes, Format, ImportOptions, Instance, InstancedMesh, Material, Submesh, Texture,
@@ -364,4 +364,57 @@ fn a_damaged_manifest_does_not_block_the_next_build() {
         bvh.node_count()
     );
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The unoptimised baseline streams its handoffs through parts files instead of holding a
+/// level of world-space meshes: every internal node's merge is exactly the triangles its
+/// children's aggregates kept (nothing lost in the round trip), each aggregate keeps its
+/// materials and textures from the source models, and the build is deterministic.
+#[test]
+fn the_baseline_reads_its_children_back_from_parts_files() {
+    let w = world();
+    let bvh = tree(&w);
+    let mut opts = options(&w);
+    opts.aggregate = opts.aggregate.unoptimized();
+    let (a, b) = (temp("base-a"), temp("base-b"));
+    let (sa, sb) = (AggregateStore::new(&a), AggregateStore::new(&b));
+    let ra = build_aggregates(&bvh, &w.models, &sa, &opts, &|_| {}).expect("build a");
+    build_aggregates(&bvh, &w.models, &sb, &opts, &|_| {}).expect("build b");
+    assert!(ra.failed.is_empty(), "{:?}", ra.failed);
+    assert_eq!(ra.built, bvh.node_count());
+    let ma = sa.manifest().expect("read").expect("manifest");
+    let mb = sb.manifest().expect("read").expect("manifest");
+    let mut internal = 0;
+    for (&node, e) in &ma.nodes {
+        assert_eq!(
+            mb.nodes[&node].glb, e.glb,
+            "node {node} differs between builds"
+        );
+        assert!(e.parts.is_some(), "node {node} has no parts file");
+        let n = bvh.node(NodeId(node)).expect("node");
+        let bytes = std::fs::read(sa.glb(&e.glb)).expect("glb exists");
+        let mesh = import_bytes(&bytes, Format::Glb, None, &ImportOptions::default())
+            .expect("aggregate imports")
+            .mesh;
+        mesh.validate().expect("valid");
+        // The boxes (models 0 and 1) are textured, the spike is not.
+        let mut under = Vec::new();
+        bvh.objects_under(NodeId(node), &mut under);
+        let boxes = under
+            .iter()
+            .any(|&o| bvh.object(o).expect("object").model() < 2);
+        assert_eq!(!mesh.textures.is_empty(), boxes, "node {node}: textures");
+        if n.is_leaf() {
+            continue;
+        }
+        internal += 1;
+        let kept: u64 = n
+            .child_nodes()
+            .map(|c| ma.nodes[&c.0].stats.triangles_out)
+            .sum();
+        assert_eq!(e.stats.triangles_in, kept, "node {node}");
+    }
+    assert!(internal >= 2, "the tree has internal nodes below the root");
+    let _ = std::fs::remove_dir_all(&a);
+    let _ = std::fs::remove_dir_all(&b);
 }
