@@ -10,7 +10,7 @@
 //! rebuilt are O(k log n). A dirty node whose children were reused reads their handoffs
 //! back from the store's parts files.
 
-use std::collections::{BTreeMap, HashMap};
+use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
@@ -38,7 +38,7 @@ pub const AUTO_ATLAS_TEXTURES: usize = 100;
 pub const AUTO_ATLAS_BYTES: u64 = 64 * 1024 * 1024;
 
 /// What the rebuild is asked for.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct BuildOptions {
     /// Options of every aggregate.
     pub aggregate: AggregateOptions,
@@ -47,6 +47,12 @@ pub struct BuildOptions {
     /// Stop with [`AggregateError::Interrupted`] after building this many aggregates,
     /// without writing the manifest: crash injection for tests.
     pub stop_after: Option<usize>,
+    /// Build only these nodes (each with every node below it, which its handoffs need), and
+    /// write a manifest of them alone, under a root key of its own so that it is never taken
+    /// for a whole build. `None`: every node. The report uses it for the baseline, whose
+    /// upper aggregates (world-space merges of everything below) do not fit in memory on a
+    /// large world and are in no measured cut.
+    pub only: Option<BTreeSet<u32>>,
 }
 
 /// Progress of a rebuild, for a progress bar.
@@ -113,7 +119,28 @@ pub fn build_aggregates(
     let atlas = resolve_atlas(options);
     let levels = levels(bvh);
     let keys = node_keys(bvh, models, &levels, &options.aggregate, atlas)?;
-    let root_key = keys.get(&bvh.root()).cloned().unwrap_or_default();
+    let only = options.only.as_ref().map(|roots| closed_below(bvh, roots));
+    let root_key = match &only {
+        None => keys.get(&bvh.root()).cloned().unwrap_or_default(),
+        // A partial build's key names the nodes it holds.
+        Some(set) => {
+            let mut h = KeyHasher::new();
+            h.write(b"partial");
+            for n in set {
+                if let Some(k) = keys.get(&NodeId(*n)) {
+                    h.write(k.as_bytes());
+                }
+            }
+            h.finish_hex()
+        }
+    };
+    let levels: Vec<Vec<NodeId>> = match &only {
+        None => levels,
+        Some(set) => levels
+            .into_iter()
+            .map(|level| level.into_iter().filter(|n| set.contains(&n.0)).collect())
+            .collect(),
+    };
     // Stage 2: what the store already has.
     let mut known = store.known()?;
     if options.aggregate.method == Method::Unoptimized {
@@ -254,6 +281,21 @@ pub fn build_aggregates(
     })?;
     report.seconds = start.elapsed().as_secs_f64();
     Ok(report)
+}
+
+/// `roots` and every node below them.
+fn closed_below(bvh: &Bvh, roots: &BTreeSet<u32>) -> BTreeSet<u32> {
+    let mut out = BTreeSet::new();
+    let mut stack: Vec<NodeId> = roots.iter().map(|&n| NodeId(n)).collect();
+    while let Some(n) = stack.pop() {
+        if !out.insert(n.0) {
+            continue;
+        }
+        if let Some(node) = bvh.node(n) {
+            stack.extend(node.child_nodes());
+        }
+    }
+    out
 }
 
 /// Whether aggregates are atlased under `options`.

@@ -113,6 +113,8 @@ fn spike() -> InstancedMesh {
 
 struct World {
     models: InMemoryModels,
+    /// Per model: its shape and texture descriptors, lent to the tree's new objects.
+    descriptors: Vec<(Vec<f32>, Vec<f32>)>,
     /// Per object: model number and transform.
     objects: Vec<(u64, Affine3A)>,
     radii: Vec<f32>,
@@ -144,8 +146,13 @@ fn world() -> World {
             Affine3A::from_translation(Vec3::new((k % 8) as f32 * 3.0, 0.0, (k / 8) as f32 * 3.0));
         objects.push((model, t));
     }
+    let descriptors = models
+        .iter()
+        .map(|m| (m.shape.clone(), m.texture.clone()))
+        .collect();
     World {
         models: InMemoryModels::new(models),
+        descriptors,
         objects,
         radii,
     }
@@ -154,9 +161,8 @@ fn world() -> World {
 fn new_object<'a>(w: &'a World, model: u64, t: Affine3A) -> NewObject<'a> {
     let m = horizon_aggregate::ModelSource::model(&w.models, model).expect("model");
     let b = m.mesh.bounds();
-    // Descriptors live in the source model; the BVH copies them.
-    let shape: &'a [f32] = &leaked_descriptors(&w.models, model).0;
-    let texture: &'a [f32] = &leaked_descriptors(&w.models, model).1;
+    // The BVH copies the descriptors it is lent.
+    let (shape, texture) = &w.descriptors[model as usize];
     NewObject {
         model,
         transform: t,
@@ -167,14 +173,6 @@ fn new_object<'a>(w: &'a World, model: u64, t: Affine3A) -> NewObject<'a> {
         shape,
         texture,
     }
-}
-
-/// The descriptors of a model, borrowed from the in-memory source.
-fn leaked_descriptors(models: &InMemoryModels, model: u64) -> &(Vec<f32>, Vec<f32>) {
-    // SourceModel is behind an Arc owned by `models`, so a leaked clone keeps the borrow
-    // simple in this test.
-    let m = horizon_aggregate::ModelSource::model(models, model).expect("model");
-    Box::leak(Box::new((m.shape.clone(), m.texture.clone())))
 }
 
 fn tree(w: &World) -> Bvh {
@@ -199,6 +197,7 @@ fn options(w: &World) -> BuildOptions {
         aggregate: AggregateOptions::default(),
         world_textures: w.models.texture_totals(),
         stop_after: None,
+        only: None,
     }
 }
 
@@ -415,6 +414,43 @@ fn the_baseline_reads_its_children_back_from_parts_files() {
         assert_eq!(e.stats.triangles_in, kept, "node {node}");
     }
     assert!(internal >= 2, "the tree has internal nodes below the root");
+    let _ = std::fs::remove_dir_all(&a);
+    let _ = std::fs::remove_dir_all(&b);
+}
+
+/// A build restricted to some nodes builds exactly them and everything below them, with the
+/// same aggregates as the whole build, and its manifest is never taken for a whole build.
+#[test]
+fn a_partial_build_builds_the_named_subtrees_only() {
+    let w = world();
+    let bvh = tree(&w);
+    let (a, b) = (temp("part-a"), temp("part-b"));
+    let (sa, sb) = (AggregateStore::new(&a), AggregateStore::new(&b));
+    build_aggregates(&bvh, &w.models, &sa, &options(&w), &|_| {}).expect("whole build");
+    let whole = sa.manifest().expect("read").expect("manifest");
+    let root = bvh.node(bvh.root()).expect("root");
+    let pick = root.child_nodes().next().expect("a child of the root");
+    let mut below = Vec::new();
+    let mut stack = vec![pick];
+    while let Some(n) = stack.pop() {
+        below.push(n.0);
+        stack.extend(bvh.node(n).expect("node").child_nodes());
+    }
+    let partial = BuildOptions {
+        only: Some([pick.0].into_iter().collect()),
+        ..options(&w)
+    };
+    let report = build_aggregates(&bvh, &w.models, &sb, &partial, &|_| {}).expect("partial");
+    assert_eq!(report.built, below.len());
+    let part = sb.manifest().expect("read").expect("manifest");
+    let mut held: Vec<u32> = part.nodes.keys().copied().collect();
+    held.sort_unstable();
+    below.sort_unstable();
+    assert_eq!(held, below);
+    for n in &below {
+        assert_eq!(part.nodes[n].glb, whole.nodes[n].glb, "node {n}");
+    }
+    assert_ne!(part.root_key, whole.root_key);
     let _ = std::fs::remove_dir_all(&a);
     let _ = std::fs::remove_dir_all(&b);
 }

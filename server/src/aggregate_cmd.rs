@@ -90,6 +90,19 @@ pub fn build_into(
     options: AggregateOptions,
     what: &str,
 ) -> anyhow::Result<BuildReport> {
+    build_some_into(bvh, models, store, options, None, what)
+}
+
+/// Builds the aggregates of `only` (and every node below them; all nodes for `None`) into
+/// `store`, with a progress bar on a terminal.
+pub fn build_some_into(
+    bvh: &Bvh,
+    models: &InMemoryModels,
+    store: &AggregateStore,
+    options: AggregateOptions,
+    only: Option<BTreeSet<u32>>,
+    what: &str,
+) -> anyhow::Result<BuildReport> {
     let bar = ProgressBar::new(what);
     let report = build_aggregates(
         bvh,
@@ -99,6 +112,7 @@ pub fn build_into(
             aggregate: options,
             world_textures: models.texture_totals(),
             stop_after: None,
+            only,
         },
         &|p| bar.show(p),
     )?;
@@ -218,13 +232,47 @@ pub fn report(
     let ours = aggregate_store(dir)
         .manifest()?
         .with_context(|| format!("no aggregates in {} (run horizon build)", dir.display()))?;
-    // The unoptimised baseline, built once with the same display model and cached.
+    // The cuts of the seeded viewpoints.
+    let bounds = bvh
+        .node(bvh.root())
+        .map(|n| n.aabb())
+        .context("the world is empty")?;
+    let positions: Vec<Vec3> = crate::world_cmd::viewpoints(&bounds, seed, views);
+    let cuts: Vec<Vec<horizon_bvh::CutEntry>> = positions
+        .iter()
+        .map(|&position| {
+            bvh.cut(&CutQuery {
+                position,
+                min_solid_angle,
+                max_results,
+            })
+            .entries
+        })
+        .collect();
+    // The unoptimised baseline, with the same display model, cached: only the aggregates in
+    // these cuts and the nodes below them (its upper merges of whole world-space meshes
+    // would not fit in memory on a large world, and no cut here shows them).
     let t = Instant::now();
     let baseline_options = ours.options.unoptimized();
     let base_store = baseline_store(dir);
     let cache: DescriptorCache = WorldDir::read_json(&world.descriptors())?;
     let models = load_models(&world, &manifest, &cache)?;
-    let base_report = build_into(&bvh, &models, &base_store, baseline_options, "baseline")?;
+    let shown: BTreeSet<u32> = cuts
+        .iter()
+        .flatten()
+        .filter_map(|e| match e.item {
+            CutItem::Aggregate(n) => Some(n.0),
+            CutItem::Object(_) => None,
+        })
+        .collect();
+    let base_report = build_some_into(
+        &bvh,
+        &models,
+        &base_store,
+        baseline_options,
+        Some(shown),
+        "baseline",
+    )?;
     let baseline_seconds = if base_report.built > 0 {
         t.elapsed().as_secs_f64()
     } else {
@@ -271,23 +319,12 @@ pub fn report(
     let ours_assets = aggregate_assets(&ours);
     let base_assets = aggregate_assets(&base);
 
-    let bounds = bvh
-        .node(bvh.root())
-        .map(|n| n.aabb())
-        .context("the world is empty")?;
-    let positions: Vec<Vec3> = crate::world_cmd::viewpoints(&bounds, seed, views);
     let mut sums = [0.0f64; 8];
     let mut per_view = Vec::new();
-    for &position in &positions {
-        let cut = bvh.cut(&CutQuery {
-            position,
-            min_solid_angle,
-            max_results,
-        });
-        let a = join(&bvh, &cut.entries, &model_assets, &ours_assets, &manifest)?;
-        let b = join(&bvh, &cut.entries, &model_assets, &base_assets, &manifest)?;
-        let aggregates = cut
-            .entries
+    for entries in &cuts {
+        let a = join(&bvh, entries, &model_assets, &ours_assets, &manifest)?;
+        let b = join(&bvh, entries, &model_assets, &base_assets, &manifest)?;
+        let aggregates = entries
             .iter()
             .filter(|e| matches!(e.item, CutItem::Aggregate(_)))
             .count();
@@ -298,7 +335,7 @@ pub fn report(
             b.draws as f64,
             a.textures as f64,
             b.textures as f64,
-            cut.entries.len() as f64,
+            entries.len() as f64,
             aggregates as f64,
         ]) {
             *s += v;
