@@ -219,6 +219,28 @@ impl Bvh {
         }
     }
 
+    /// Refines node `n` of a heap-free walk: a leaf's objects become entries, an internal
+    /// node's children go on `stack`. Returns how many went on the stack.
+    pub(crate) fn refine_onto(
+        &self,
+        viewer: Vec3,
+        n: u32,
+        entries: &mut Vec<CutEntry>,
+        stack: &mut Vec<u32>,
+    ) -> usize {
+        let kids = self.kids(n);
+        match self.nodes[n as usize].kind {
+            NodeKind::Leaf => {
+                entries.extend(kids.iter().map(|&o| self.object_entry(viewer, o, n)));
+                0
+            }
+            _ => {
+                stack.extend_from_slice(kids);
+                kids.len()
+            }
+        }
+    }
+
     pub(crate) fn aggregate(&self, n: u32, node: &Node, solid_angle: f32) -> CutEntry {
         CutEntry {
             item: CutItem::Aggregate(NodeId(n)),

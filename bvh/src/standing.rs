@@ -290,15 +290,7 @@ impl StandingQuery {
                 return false;
             }
             self.next_refined.insert(n);
-            let kids = bvh.kids(n);
-            match node.kind {
-                NodeKind::Leaf => {
-                    for &o in kids {
-                        self.fresh.push(bvh.object_entry(viewer, o, n));
-                    }
-                }
-                _ => self.stack.extend_from_slice(kids),
-            }
+            bvh.refine_onto(viewer, n, &mut self.fresh, &mut self.stack);
         }
         true
     }
@@ -402,18 +394,7 @@ impl StandingQuery {
             }
             ws.refined.push(n);
             ws.refined_keys.push(key);
-            let kids = bvh.kids(n);
-            match node.kind {
-                NodeKind::Leaf => {
-                    for &o in kids {
-                        out.entries.push(bvh.object_entry(viewer, o, n));
-                    }
-                }
-                _ => {
-                    out.nodes_visited += kids.len();
-                    self.stack.extend_from_slice(kids);
-                }
-            }
+            out.nodes_visited += bvh.refine_onto(viewer, n, &mut out.entries, &mut self.stack);
         }
         // Heapify the frontier in linear time.
         ws.heap = BinaryHeap::from(frontier);
