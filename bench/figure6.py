@@ -4,9 +4,9 @@ For each world directory given (generated with `horizon gen world`), and each (m
 grid, builds the BVH and every aggregate (`horizon build --mu --omega`), then measures the
 join download of ten seeded viewpoints (`horizon report --json`), with the query cost of the
 same cuts (entries and aggregates per cut; `horizon sweep` gives nodes visited over the full
-grid, in figure5.md). Writes bench/results/figure6.{md,json}.
+grid, in figure5.md). Writes bench/results/NAME.{md,json} (NAME default figure6).
 
-Usage: figure6.py HORIZON_BINARY DIR [DIR...] [--mu 0,0.4,0.8,1] [--w 0.2]"""
+Usage: figure6.py HORIZON_BINARY DIR [DIR...] [--mu 0,0.4,0.8,1] [--w 0.2] [--name NAME]"""
 import json
 import pathlib
 import subprocess
@@ -25,10 +25,13 @@ def run(cmd):
 
 def main(argv):
     horizon, rest = argv[0], argv[1:]
-    mus, ws, dirs = [0.0, 0.4, 0.8, 1.0], [0.2], []
+    mus, ws, dirs, out_name = [0.0, 0.4, 0.8, 1.0], [0.2], [], "figure6"
     k = 0
     while k < len(rest):
-        if rest[k] == "--mu":
+        if rest[k] == "--name":
+            out_name = rest[k + 1]
+            k += 2
+        elif rest[k] == "--mu":
             mus = [float(x) for x in rest[k + 1].split(",")]
             k += 2
         elif rest[k] == "--w":
@@ -64,11 +67,11 @@ def main(argv):
                 print(json.dumps(row), flush=True)
     out = ROOT / "bench" / "results"
     out.mkdir(parents=True, exist_ok=True)
-    (out / "figure6.json").write_text(json.dumps(rows, indent=1))
+    (out / f"{out_name}.json").write_text(json.dumps(rows, indent=1))
     lines = [
         "# Figure 6: join download over mu and w",
         "",
-        "`python3 bench/figure6.py target/release/horizon DIR...`, one run on this machine (2 cores);",
+        f"`python3 bench/figure6.py target/release/horizon DIR... --mu {','.join(map(str, mus))} --w {','.join(map(str, ws))}`, one run on this machine (2 cores);",
         "10 seeded viewpoints, Omega_min 1e-3, at most 4000 entries per cut. Query cost (entries",
         "and aggregates per cut) from the same cuts; the nodes-visited cost is in figure5.md.",
         "",
@@ -81,7 +84,7 @@ def main(argv):
             f"{r['unoptimized_join_bytes_mean']/1e6:.2f} | {r['naive_bytes']/1e6:.2f} | "
             f"{r['entries_mean']:.0f} | {r['aggregates_mean']:.0f} | {r['draw_calls_mean']:.0f} | {r['build_seconds']:.1f} |"
         )
-    (out / "figure6.md").write_text("\n".join(lines) + "\n")
+    (out / f"{out_name}.md").write_text("\n".join(lines) + "\n")
 
 
 if __name__ == "__main__":
