@@ -167,9 +167,10 @@ pub fn build_aggregates(
         ..BuildReport::default()
     };
     let failed: Mutex<Vec<(u32, String)>> = Mutex::new(Vec::new());
-    // The level just built: its handoffs in memory (the optimised versions, which share the
-    // source submeshes), and its entries, through which the baseline's handoffs (whole
-    // world-space meshes, too large to hold a level of) are read back from their parts files.
+    // The level just built or reused: its handoffs in memory (the optimised versions built
+    // this run, which share the source submeshes), and its entries, through which every other
+    // handoff (reused ones, and the baseline's whole world-space meshes, too large to hold a
+    // level of) is read back from its parts file.
     let mut below: HashMap<NodeId, Arc<Handoff>> = HashMap::new();
     let mut below_entries: HashMap<NodeId, AggregateEntry> = HashMap::new();
     for (depth, level) in levels.iter().enumerate().rev() {
@@ -196,7 +197,6 @@ pub fn build_aggregates(
                     node,
                     &below,
                     &below_entries,
-                    &known,
                     &keys,
                     store,
                     models,
@@ -254,9 +254,7 @@ pub fn build_aggregates(
                     report.reused += 1;
                 }
                 report.bytes_total += e.stats.bytes as u64;
-                if built {
-                    next_entries.insert(node, e.clone());
-                }
+                next_entries.insert(node, e.clone());
                 entries.insert(node.0, e);
             }
             if let Some(h) = handoff {
@@ -427,14 +425,14 @@ fn node_input(
     })
 }
 
-/// The handoffs of `node`'s child nodes: built this run, or read back from the store.
+/// The handoffs of `node`'s child nodes: built this run, or read back from the store through
+/// their entries (`below_entries`: every child that has an aggregate, built or reused).
 #[allow(clippy::too_many_arguments)]
 fn child_handoffs(
     bvh: &Bvh,
     node: NodeId,
     below: &HashMap<NodeId, Arc<Handoff>>,
     below_entries: &HashMap<NodeId, AggregateEntry>,
-    known: &HashMap<String, AggregateEntry>,
     keys: &HashMap<NodeId, String>,
     store: &AggregateStore,
     models: &dyn ModelSource,
@@ -451,7 +449,6 @@ fn child_handoffs(
             out.push(h.clone());
         } else if let Some(h) = below_entries
             .get(&c)
-            .or_else(|| keys.get(&c).and_then(|k| known.get(k)))
             .and_then(|e| decode_parts(store, e, models, method))
         {
             out.push(Arc::new(h));

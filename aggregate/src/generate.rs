@@ -477,26 +477,16 @@ impl Merger {
         self.mesh.submeshes.len() - 1
     }
 
-    /// The merged index of material `m` of `model`, adding it (and its texture) if new.
+    /// The merged index of material `m` of `model` (found at that index of `from`, the
+    /// model's mesh), adding it and its texture, each shared by (model, index), if new.
     fn material(&mut self, model: u64, m: usize, from: &InstancedMesh) -> Option<usize> {
-        self.share_material((model, m), m, |t| (model, t), from)
-    }
-
-    /// The merged index of the material with source `key`, found at index `local` of `from`;
-    /// added (with its texture, shared under `texture_key` of its index in `from`) if new.
-    fn share_material(
-        &mut self,
-        key: (u64, usize),
-        local: usize,
-        texture_key: impl FnOnce(usize) -> (u64, usize),
-        from: &InstancedMesh,
-    ) -> Option<usize> {
+        let key = (model, m);
         if let Some(&i) = self.materials.get(&key) {
             return Some(i);
         }
-        let mut material: Material = from.materials.get(local)?.clone();
+        let mut material: Material = from.materials.get(m)?.clone();
         if let Some(t) = material.base_color_texture.as_mut() {
-            let tkey = texture_key(t.texture);
+            let tkey = (model, t.texture);
             let index = match self.textures.get(&tkey) {
                 Some(&i) => i,
                 None => {

@@ -36,8 +36,8 @@ impl Bvh {
         transform: Affine3A,
         sphere: Sphere,
     ) -> Result<(), BvhError> {
-        // Refuse bad input before anything changes.
         self.touch();
+        // Refuse bad input before anything changes.
         let o = self.live_object(id)?;
         check_placement(&transform, &sphere)?;
         self.objects.transform[o as usize] = transform;
