@@ -7,6 +7,11 @@
 //! DIR/aggregates/manifest.json      the current aggregate of every node of the tree
 //! ```
 //!
+//! A *measuring* store ([`AggregateStore::measuring`]) keeps everything but the aggregate GLBs
+//! themselves: their hashes and sizes are journalled, their bytes dropped. The report's
+//! unoptimised baseline lives in one, since only its sizes are ever read and its GLBs, each
+//! carrying every source texture below it, would fill gigabytes.
+//!
 //! Files are immutable and content-addressed; a changed aggregate gets a new name. Every
 //! file is written atomically (temporary file, fsync, rename, fsync of the folder), and the
 //! manifest is written last, so a crash mid-build leaves the previous manifest valid and
@@ -65,6 +70,8 @@ pub struct AggregateManifest {
 pub struct AggregateStore {
     root: PathBuf,
     journal: Mutex<Option<std::fs::File>>,
+    /// Whether aggregate GLBs are written (false for a measuring store).
+    keep_glbs: bool,
 }
 
 impl AggregateStore {
@@ -73,7 +80,23 @@ impl AggregateStore {
         Self {
             root: root.to_path_buf(),
             journal: Mutex::new(None),
+            keep_glbs: true,
         }
+    }
+
+    /// A store in `root` that journals each aggregate's hash and size but never writes its
+    /// GLB (parts files, journal and manifest are kept as usual): for aggregates that are
+    /// only measured.
+    pub fn measuring(root: &Path) -> Self {
+        Self {
+            keep_glbs: false,
+            ..Self::new(root)
+        }
+    }
+
+    /// Whether this store writes aggregate GLBs (false for [`AggregateStore::measuring`]).
+    pub fn keeps_glbs(&self) -> bool {
+        self.keep_glbs
     }
 
     /// The folder.
@@ -118,7 +141,8 @@ impl AggregateStore {
     }
 
     /// Every aggregate this store knows by key: the manifest's, then the journal's (later
-    /// lines win), keeping only those whose files exist. A manifest that does not parse is
+    /// lines win), keeping only those whose files exist (for a measuring store, whose GLBs
+    /// are never written, their parts files). A manifest that does not parse is
     /// skipped (the next build replaces it), so a damaged file never blocks a rebuild.
     pub fn known(&self) -> Result<HashMap<String, AggregateEntry>, AggregateError> {
         let mut out = HashMap::new();
@@ -145,12 +169,14 @@ impl AggregateStore {
             Err(e) => return Err(AggregateError::io(path, e)),
         }
         out.retain(|_, e| {
-            self.glb(&e.glb).exists() && e.parts.as_ref().is_none_or(|p| self.parts(p).exists())
+            (!self.keep_glbs || self.glb(&e.glb).exists())
+                && e.parts.as_ref().is_none_or(|p| self.parts(p).exists())
         });
         Ok(out)
     }
 
-    /// Stores an aggregate's GLB and parts, then journals its entry.
+    /// Stores an aggregate's GLB (unless the store is measuring) and parts, then journals its
+    /// entry.
     pub fn put(
         &self,
         key: String,
@@ -159,7 +185,9 @@ impl AggregateStore {
         stats: NodeStats,
     ) -> Result<AggregateEntry, AggregateError> {
         let glb_hash = content_hash(glb);
-        write_if_absent(&self.glb(&glb_hash), glb)?;
+        if self.keep_glbs {
+            write_if_absent(&self.glb(&glb_hash), glb)?;
+        }
         let (parts_hash, part_keys) = match parts {
             Some((bytes, keys)) => {
                 let h = content_hash(bytes);
@@ -331,6 +359,28 @@ mod tests {
         let known = store.known().expect("known");
         assert_eq!(known.len(), 1);
         assert_eq!(known["k1"], e);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn a_measuring_store_journals_sizes_but_writes_no_glb() {
+        let dir = std::env::temp_dir().join(format!("horizon-measure-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let store = AggregateStore::measuring(&dir);
+        let e = store
+            .put(
+                "k1".into(),
+                b"glb bytes",
+                Some((b"parts", Vec::new())),
+                NodeStats::default(),
+            )
+            .expect("put");
+        assert!(!store.glb(&e.glb).exists());
+        assert!(store.parts(e.parts.as_deref().expect("parts")).exists());
+        // Still known (for reuse) although its GLB was never written.
+        assert_eq!(store.known().expect("known")["k1"], e);
+        // The same folder opened as a full store does not claim a GLB it lacks.
+        assert!(AggregateStore::new(&dir).known().expect("known").is_empty());
         let _ = std::fs::remove_dir_all(&dir);
     }
 }

@@ -48,9 +48,10 @@ pub fn aggregate_store(dir: &Path) -> AggregateStore {
     AggregateStore::new(&dir.join("aggregates"))
 }
 
-/// `DIR/baseline`: the unoptimised aggregates `horizon report` compares with.
+/// `DIR/baseline`: the unoptimised aggregates `horizon report` compares with, measured but
+/// not kept (their sizes, parts and manifest are; their GLBs would take gigabytes).
 pub fn baseline_store(dir: &Path) -> AggregateStore {
-    AggregateStore::new(&dir.join("baseline"))
+    AggregateStore::measuring(&dir.join("baseline"))
 }
 
 /// Every model of the world, imported and prepared, numbered as the BVH numbers them.

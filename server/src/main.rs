@@ -128,7 +128,7 @@ enum Command {
     },
     /// The join download of a built world: for seeded viewpoints, the unique bytes of every
     /// asset in the cut, with draw calls and textures, against every model of the world
-    /// (naive) and against unoptimised aggregates (built into DIR/baseline on first use).
+    /// (naive) and against unoptimised aggregates (built into DIR/baseline on first use; only their sizes and handoffs are kept).
     Report {
         /// The built world directory.
         dir: PathBuf,
