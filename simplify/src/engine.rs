@@ -75,13 +75,52 @@ struct Vert {
 }
 
 /// A triangle as three wedges and as their three position vertices (`[DEAD; 3]` once
-/// collapsed away), in one aligned half cache line: the hot loop reads topology, liveness and
-/// wedges in one load.
+/// collapsed away), plus its input normal, in one aligned half cache line: the hot loop reads
+/// topology, liveness and wedges in one load.
 #[derive(Debug, Clone, Copy)]
 #[repr(align(32))]
 struct Tri {
     w: [u32; 3],
     p: [u32; 3],
+    /// The unit normal the triangle had in the input, octahedron-encoded
+    /// ([`encode_normal`]); [`NO_NORMAL`] for a zero-area input triangle. The flip test
+    /// compares every new normal with it as well as with the current one, so that no chain of
+    /// small turns, and no pass through a zero-area state, can turn a triangle over.
+    n: [f32; 2],
+}
+
+/// [`Tri::n`] of a triangle that had no normal (zero area) in the input.
+const NO_NORMAL: [f32; 2] = [f32::NAN, f32::NAN];
+
+/// Octahedral encoding of a direction (zero encodes as [`NO_NORMAL`]).
+fn encode_normal(n: DVec3) -> [f32; 2] {
+    let l1 = n.x.abs() + n.y.abs() + n.z.abs();
+    if !(l1 > 0.0 && l1.is_finite()) {
+        return NO_NORMAL;
+    }
+    let (x, y) = (n.x / l1, n.y / l1);
+    let (x, y) = if n.z < 0.0 {
+        ((1.0 - y.abs()) * x.signum(), (1.0 - x.abs()) * y.signum())
+    } else {
+        (x, y)
+    };
+    [x as f32, y as f32]
+}
+
+/// The direction [`encode_normal`] encoded (not normalised; the flip test needs none), or
+/// `None` for [`NO_NORMAL`].
+fn decode_normal(e: [f32; 2]) -> Option<DVec3> {
+    if e[0].is_nan() {
+        return None;
+    }
+    let (x, y) = (f64::from(e[0]), f64::from(e[1]));
+    let z = 1.0 - x.abs() - y.abs();
+    let (x, y) = if z < 0.0 {
+        ((1.0 - y.abs()) * x.signum(), (1.0 - x.abs()) * y.signum())
+    } else {
+        (x, y)
+    };
+    Some(DVec3::new(x, y, z))
 }
 
 #[derive(Debug, Clone)]
@@ -167,6 +206,55 @@ impl Workspace {
     /// An empty workspace.
     pub fn new() -> Self {
         Self::default()
+    }
+
+    /// Checks the state the last simplification left: every live triangle has three distinct,
+    /// live position vertices of its own submesh, every vertex's adjacency names only
+    /// triangles that hold it, and, the no-flip promise, no triangle faces more than 90
+    /// degrees away from its input normal in any instance (in the exact f64 positions, before
+    /// export rounds them).
+    pub fn validate(&self) -> Result<(), String> {
+        for (si, sub) in self.subs.iter().enumerate() {
+            for t in sub.tri_base..sub.tri_end {
+                if !self.alive(t) {
+                    continue;
+                }
+                let p = self.tri_verts(t);
+                if p[0] == p[1] || p[1] == p[2] || p[0] == p[2] {
+                    return Err(format!("triangle {t} has a repeated vertex: {p:?}"));
+                }
+                if let Some(&v) = p.iter().find(|&&v| {
+                    v as usize >= self.verts.len() || self.vsub[v as usize] != si as u32
+                }) {
+                    return Err(format!("triangle {t} of submesh {si} names vertex {v}"));
+                }
+                let [a, b, c] = p.map(|v| self.verts[v as usize].pos);
+                let n = (b - a).cross(c - a);
+                if let Some(input) = decode_normal(self.tris[t as usize].n) {
+                    if !sub.guard.same_side(input, n) {
+                        return Err(format!(
+                            "triangle {t} of submesh {si} turned over: input normal {input}, now {n}"
+                        ));
+                    }
+                }
+            }
+        }
+        for (v, vert) in self.verts.iter().enumerate() {
+            let start = vert.adj_start as usize;
+            let ring = self
+                .adj
+                .get(start..start + vert.adj_len as usize)
+                .ok_or_else(|| format!("vertex {v}: adjacency out of range"))?;
+            if let Some(&t) = ring
+                .iter()
+                .find(|&&t| self.alive(t) && !self.tri_verts(t).contains(&(v as u32)))
+            {
+                return Err(format!(
+                    "vertex {v} lists triangle {t}, which does not hold it"
+                ));
+            }
+        }
+        Ok(())
     }
 
     /// Stage 1: loads every instanced submesh of `mesh`, welds positions, and classifies
@@ -259,7 +347,9 @@ impl Workspace {
             // A triangle with a repeated position is a point or a segment: it draws nothing
             // and would only confuse the topology, so it is dropped (the count goes down).
             if p[0] != p[1] && p[1] != p[2] && p[0] != p[2] {
-                self.tris.push(Tri { w, p });
+                let [a, b, c] = p.map(|v| self.verts[v as usize].pos);
+                let n = encode_normal((b - a).cross(c - a));
+                self.tris.push(Tri { w, p, n });
             }
         }
     }
@@ -786,6 +876,11 @@ impl Workspace {
             if n0 != DVec3::ZERO && !guard.same_side(n0, n1) {
                 return None;
             }
+            if let Some(input) = decode_normal(self.tris[t as usize].n) {
+                if !guard.same_side(input, n1) {
+                    return None;
+                }
+            }
         }
         Some(map)
     }
@@ -1063,5 +1158,40 @@ mod layout_tests {
     #[test]
     fn a_vertex_is_two_cache_lines() {
         assert_eq!(std::mem::size_of::<super::Vert>(), 128);
+    }
+
+    /// A triangle, input normal included, is half a cache line.
+    #[test]
+    fn a_triangle_is_half_a_cache_line() {
+        assert_eq!(std::mem::size_of::<super::Tri>(), 32);
+    }
+
+    /// The octahedral code keeps a direction to float precision, in all eight octants and on
+    /// the axes, and marks zero as no normal.
+    #[test]
+    fn normals_survive_their_encoding() {
+        use glam::DVec3;
+        let mut dirs = vec![
+            DVec3::X,
+            -DVec3::X,
+            DVec3::Y,
+            -DVec3::Y,
+            DVec3::Z,
+            -DVec3::Z,
+        ];
+        for sx in [-1.0, 1.0] {
+            for sy in [-1.0, 1.0] {
+                for sz in [-1.0, 1.0] {
+                    dirs.push(DVec3::new(0.3 * sx, 0.5 * sy, 0.8 * sz));
+                    dirs.push(DVec3::new(2.0 * sx, 1e-3 * sy, 7.0 * sz));
+                }
+            }
+        }
+        for d in dirs {
+            let back = super::decode_normal(super::encode_normal(d)).expect("a direction");
+            let err = back.normalize().angle_between(d.normalize());
+            assert!(err < 1e-6, "{d} came back as {back} ({err} rad)");
+        }
+        assert!(super::decode_normal(super::encode_normal(DVec3::ZERO)).is_none());
     }
 }
