@@ -1,6 +1,8 @@
 //! One node's aggregate (core paper sections 5 to 7): gather the children's representations,
 //! cull what cannot show, dedup near-duplicates (Table 1), merge into one instanced mesh,
-//! simplify with IAS to the node's budget, atlas, encode.
+//! simplify with IAS to the node's budget, atlas, bake the placements that cost less written
+//! out than instanced into one submesh (`InstancedMesh::bake_cheap_instances`: fewer draw
+//! calls and less JSON), encode (16-bit instance rotations, `ExportOptions::aggregate`).
 //!
 //! What a node hands its parent ([`Handoff`]) is not its final GLB but the simplified
 //! version of every model submesh it drew, in model space. The parent then instances one
@@ -276,6 +278,8 @@ fn generate_optimized(
     } else {
         simplified
     };
+    // Stage 7, bake the cheap placements (single ones, tiny parts) into shared geometry.
+    let out = out.bake_cheap_instances();
     let mut out = finish(input.node, out, handoff, stats)?;
     out.stats.seconds = start.elapsed().as_secs_f64();
     Ok(out)
@@ -353,7 +357,7 @@ fn finish(
     handoff: Handoff,
     mut stats: NodeStats,
 ) -> Result<NodeOutput, AggregateError> {
-    let glb = export_glb(&mesh, &ExportOptions::plain()).map_err(|e| AggregateError::Glb {
+    let glb = export_glb(&mesh, &ExportOptions::aggregate()).map_err(|e| AggregateError::Glb {
         node,
         reason: e.to_string(),
     })?;

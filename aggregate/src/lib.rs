@@ -36,5 +36,6 @@ pub use options::{AggregateOptions, AtlasPolicy, Method};
 pub use source::{InMemoryModels, ModelSource, SourceModel};
 pub use store::{AggregateEntry, AggregateManifest, AggregateStore};
 
-/// Version of the aggregate format written by this build; part of every key.
-pub const FORMAT: u32 = 1;
+/// Version of the aggregate format written by this build; part of every key. 2: shared buffer
+/// views, shortest float text, baked cheap placements, 16-bit instance rotations.
+pub const FORMAT: u32 = 2;

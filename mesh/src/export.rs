@@ -15,7 +15,7 @@
 
 use std::collections::{BTreeMap, BTreeSet};
 
-use glam::{Affine3A, Mat4, Vec3, Vec4};
+use glam::{Affine3A, Mat4, Quat, Vec3, Vec4};
 use serde_json::{json, Map, Value};
 
 use crate::error::ExportError;
@@ -27,17 +27,36 @@ use crate::transform::{decompose_svd, decompose_trs, Trs};
 pub struct ExportOptions {
     /// Quantize and meshopt-encode geometry (lossy for positions at 16 bits per axis).
     pub compress: bool,
+    /// Store instance rotations as normalized 16-bit quaternions (EXT_mesh_gpu_instancing
+    /// allows it without KHR_mesh_quantization): 8 bytes instead of 16 per instance, at most
+    /// about 3e-5 rad off.
+    pub short_rotations: bool,
 }
 
 impl ExportOptions {
     /// Plain float attributes, readable by every glTF loader.
     pub fn plain() -> Self {
-        Self { compress: false }
+        Self {
+            compress: false,
+            short_rotations: false,
+        }
     }
 
     /// Quantized, meshopt-compressed output for serving.
     pub fn compressed() -> Self {
-        Self { compress: true }
+        Self {
+            compress: true,
+            short_rotations: true,
+        }
+    }
+
+    /// Plain geometry with 16-bit instance rotations: what aggregates are written as, seen
+    /// from afar and made mostly of instances.
+    pub fn aggregate() -> Self {
+        Self {
+            compress: false,
+            short_rotations: true,
+        }
     }
 }
 
@@ -45,7 +64,7 @@ impl ExportOptions {
 pub fn export_glb(mesh: &InstancedMesh, options: &ExportOptions) -> Result<Vec<u8>, ExportError> {
     // Stage 1: refuse a mesh that breaks the model's invariants.
     mesh.validate()?;
-    let mut w = GlbWriter::new(options.compress);
+    let mut w = GlbWriter::new(*options);
     // Stage 2: geometry, one glTF mesh per submesh; remember each dequantisation transform.
     let by_submesh = mesh.instances_by_submesh();
     let dequantize: Vec<Affine3A> = mesh
@@ -76,6 +95,7 @@ const FLOAT: u32 = 5126;
 const UNSIGNED_SHORT: u32 = 5123;
 const UNSIGNED_INT: u32 = 5125;
 const BYTE: u32 = 5120;
+const SHORT: u32 = 5122;
 const ARRAY_BUFFER: u32 = 34962;
 const ELEMENT_ARRAY_BUFFER: u32 = 34963;
 
@@ -98,12 +118,30 @@ struct Attribute {
     normalized: bool,
     type_name: &'static str,
     count: usize,
-    bounds: Option<(Vec<f64>, Vec<f64>)>,
+    bounds: Option<(Vec<f32>, Vec<f32>)>,
+}
+
+/// Where the bytes of uncompressed accessors go: one buffer view per kind of data, shared by
+/// every accessor of that kind (each at its own `byteOffset`), rather than one view per
+/// accessor, which on an aggregate of many small submeshes was a third of the JSON.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct PoolKey {
+    stride: Option<usize>,
+    target: Option<u32>,
+}
+
+/// One shared buffer view being filled; laid out in the binary chunk by `finish`.
+struct Pool {
+    key: PoolKey,
+    view: usize,
+    bytes: Vec<u8>,
 }
 
 /// Accumulates the glTF JSON arrays and the binary chunk.
 struct GlbWriter {
     compress: bool,
+    short_rotations: bool,
+    pools: Vec<Pool>,
     /// The GLB binary chunk (buffer 0).
     bin: Vec<u8>,
     /// Size of the virtual uncompressed buffer (buffer 1) that compressed views decode into.
@@ -122,9 +160,11 @@ struct GlbWriter {
 }
 
 impl GlbWriter {
-    fn new(compress: bool) -> Self {
+    fn new(options: ExportOptions) -> Self {
         Self {
-            compress,
+            compress: options.compress,
+            short_rotations: options.short_rotations,
+            pools: Vec::new(),
             bin: Vec::new(),
             fallback_len: 0,
             accessors: Vec::new(),
@@ -147,14 +187,47 @@ impl GlbWriter {
         }
     }
 
-    /// Appends a buffer view holding `bytes` (encoded as asked when compressing).
+    /// Places `bytes` in a buffer view and returns the view and the offset in it: a shared
+    /// view per kind of data when not compressing, else a view of its own, meshopt-encoded.
     fn add_view(
         &mut self,
         bytes: &[u8],
         stride: Option<usize>,
         target: Option<u32>,
         encoding: Encoding<'_>,
-    ) -> Result<usize, ExportError> {
+    ) -> Result<(usize, usize), ExportError> {
+        if !self.compress {
+            let key = PoolKey { stride, target };
+            let k = match self.pools.iter().position(|p| p.key == key) {
+                Some(k) => k,
+                None => {
+                    // Offset and length are filled in by `finish`.
+                    let mut view = Map::new();
+                    view.insert("buffer".into(), json!(0));
+                    if let Some(s) = stride {
+                        view.insert("byteStride".into(), json!(s));
+                    }
+                    if let Some(t) = target {
+                        view.insert("target".into(), json!(t));
+                    }
+                    self.buffer_views.push(Value::Object(view));
+                    self.pools.push(Pool {
+                        key,
+                        view: self.buffer_views.len() - 1,
+                        bytes: Vec::new(),
+                    });
+                    self.pools.len() - 1
+                }
+            };
+            let pool = &mut self.pools[k];
+            // Every accessor starts on a 4-byte boundary (vertex attributes must).
+            while !pool.bytes.len().is_multiple_of(4) {
+                pool.bytes.push(0);
+            }
+            let offset = pool.bytes.len();
+            pool.bytes.extend_from_slice(bytes);
+            return Ok((pool.view, offset));
+        }
         self.align_bin();
         let mut view = Map::new();
         let encoded = match encoding {
@@ -209,12 +282,15 @@ impl GlbWriter {
             view.insert("target".into(), json!(t));
         }
         self.buffer_views.push(Value::Object(view));
-        Ok(self.buffer_views.len() - 1)
+        Ok((self.buffer_views.len() - 1, 0))
     }
 
-    fn add_accessor(&mut self, view: usize, a: &Attribute) -> usize {
+    fn add_accessor(&mut self, (view, offset): (usize, usize), a: &Attribute) -> usize {
         let mut acc = Map::new();
         acc.insert("bufferView".into(), json!(view));
+        if offset > 0 {
+            acc.insert("byteOffset".into(), json!(offset));
+        }
         acc.insert("componentType".into(), json!(a.component_type));
         if a.normalized {
             acc.insert("normalized".into(), json!(true));
@@ -222,8 +298,8 @@ impl GlbWriter {
         acc.insert("count".into(), json!(a.count));
         acc.insert("type".into(), json!(a.type_name));
         if let Some((min, max)) = &a.bounds {
-            acc.insert("min".into(), json!(min));
-            acc.insert("max".into(), json!(max));
+            acc.insert("min".into(), numbers(min));
+            acc.insert("max".into(), numbers(max));
         }
         self.accessors.push(Value::Object(acc));
         self.accessors.len() - 1
@@ -388,22 +464,28 @@ impl GlbWriter {
         let mut pbr = Map::new();
         pbr.insert(
             "baseColorFactor".into(),
-            json!(m.base_color_factor.to_array().map(unit)),
+            numbers(&m.base_color_factor.to_array().map(unit)),
         );
         if let Some(t) = &m.base_color_texture {
             let mut info = json!({ "index": t.texture });
             if let Some(x) = &t.transform {
                 self.extensions_used.insert("KHR_texture_transform");
                 info["extensions"] = json!({"KHR_texture_transform": {
-                    "offset": x.offset.to_array(),
-                    "rotation": x.rotation,
-                    "scale": x.scale.to_array(),
+                    "offset": numbers(&x.offset.to_array()),
+                    "rotation": numbers(&[x.rotation])[0].clone(),
+                    "scale": numbers(&x.scale.to_array()),
                 }});
             }
             pbr.insert("baseColorTexture".into(), info);
         }
-        pbr.insert("metallicFactor".into(), json!(unit(m.metallic_factor)));
-        pbr.insert("roughnessFactor".into(), json!(unit(m.roughness_factor)));
+        pbr.insert(
+            "metallicFactor".into(),
+            numbers(&[unit(m.metallic_factor)])[0].clone(),
+        );
+        pbr.insert(
+            "roughnessFactor".into(),
+            numbers(&[unit(m.roughness_factor)])[0].clone(),
+        );
         let mut out = Map::new();
         if let Some(name) = &m.name {
             out.insert("name".into(), json!(name));
@@ -413,7 +495,7 @@ impl GlbWriter {
             AlphaMode::Opaque => {}
             AlphaMode::Mask { cutoff } => {
                 out.insert("alphaMode".into(), json!("MASK"));
-                out.insert("alphaCutoff".into(), json!(cutoff.max(0.0)));
+                out.insert("alphaCutoff".into(), numbers(&[cutoff.max(0.0)])[0].clone());
             }
             AlphaMode::Blend => {
                 out.insert("alphaMode".into(), json!("BLEND"));
@@ -457,17 +539,30 @@ impl GlbWriter {
 
     fn write_gpu_instanced_node(&mut self, mesh: usize, trs: &[Trs]) -> Result<(), ExportError> {
         self.extensions_used.insert("EXT_mesh_gpu_instancing");
+        // Every attribute is optional: a rotation or scale that is the identity for every
+        // instance (to float precision) is left out.
+        let mut attributes = Map::new();
         let t = float_attribute(trs.iter().map(|x| x.translation.to_array()), false);
-        let r = float_attribute(trs.iter().map(|x| x.rotation.to_array()), false);
-        let s = float_attribute(trs.iter().map(|x| x.scale.to_array()), false);
-        let t = self.write_attribute(&t, None)?;
-        let r = self.write_attribute(&r, None)?;
-        let s = self.write_attribute(&s, None)?;
+        attributes.insert("TRANSLATION".into(), json!(self.write_attribute(&t, None)?));
+        if !trs
+            .iter()
+            .all(|x| x.rotation.abs_diff_eq(Quat::IDENTITY, 1e-7))
+        {
+            let rotations = trs.iter().map(|x| x.rotation.to_array());
+            let r = if self.short_rotations {
+                snorm16_attribute(rotations)
+            } else {
+                float_attribute(rotations, false)
+            };
+            attributes.insert("ROTATION".into(), json!(self.write_attribute(&r, None)?));
+        }
+        if !trs.iter().all(|x| x.scale.abs_diff_eq(Vec3::ONE, 1e-7)) {
+            let s = float_attribute(trs.iter().map(|x| x.scale.to_array()), false);
+            attributes.insert("SCALE".into(), json!(self.write_attribute(&s, None)?));
+        }
         self.nodes.push(json!({
             "mesh": mesh,
-            "extensions": {"EXT_mesh_gpu_instancing": {"attributes": {
-                "TRANSLATION": t, "ROTATION": r, "SCALE": s,
-            }}},
+            "extensions": {"EXT_mesh_gpu_instancing": {"attributes": attributes}},
         }));
         self.roots.push(self.nodes.len() - 1);
         Ok(())
@@ -475,7 +570,7 @@ impl GlbWriter {
 
     /// One node with a matrix, or a parent and child pair when the transform has shear.
     fn write_matrix_node(&mut self, mesh: usize, world: &Affine3A) {
-        let matrix = |a: &Affine3A| Mat4::from(*a).to_cols_array();
+        let matrix = |a: &Affine3A| numbers(&Mat4::from(*a).to_cols_array());
         if decompose_trs(world).is_some() {
             self.nodes
                 .push(json!({ "mesh": mesh, "matrix": matrix(world) }));
@@ -501,6 +596,13 @@ impl GlbWriter {
     }
 
     fn finish(mut self) -> Result<Vec<u8>, ExportError> {
+        for pool in std::mem::take(&mut self.pools) {
+            self.align_bin();
+            let view = &mut self.buffer_views[pool.view];
+            view["byteOffset"] = json!(self.bin.len());
+            view["byteLength"] = json!(pool.bytes.len());
+            self.bin.extend_from_slice(&pool.bytes);
+        }
         self.align_bin();
         let mut buffers = Vec::new();
         if !self.bin.is_empty() {
@@ -573,6 +675,18 @@ impl GlbWriter {
     }
 }
 
+/// f32 values as JSON numbers in their shortest round-trip form ("0.15", not
+/// "0.15000000596046448", which is what widening to f64 prints): a reader parsing the text as
+/// f32 gets the same value back.
+fn numbers<T: Copy + Into<f64> + std::fmt::Display>(values: &[T]) -> Value {
+    Value::Array(
+        values
+            .iter()
+            .map(|&x| json!(x.to_string().parse::<f64>().unwrap_or_else(|_| x.into())))
+            .collect(),
+    )
+}
+
 fn contains_null(v: &Value) -> bool {
     match v {
         Value::Null => true,
@@ -637,12 +751,7 @@ fn float_attribute<const N: usize>(
         normalized: false,
         type_name: type_name(N),
         count,
-        bounds: (bounds && count > 0).then(|| {
-            (
-                lo.iter().map(|&x| f64::from(x)).collect(),
-                hi.iter().map(|&x| f64::from(x)).collect(),
-            )
-        }),
+        bounds: (bounds && count > 0).then(|| (lo.to_vec(), hi.to_vec())),
     }
 }
 
@@ -663,6 +772,27 @@ fn snorm8_attribute(values: impl Iterator<Item = [f32; 3]>) -> Attribute {
         component_type: BYTE,
         normalized: true,
         type_name: "VEC3",
+        count,
+        bounds: None,
+    }
+}
+
+/// Values in [-1, 1] as signed normalized 16-bit integers (VEC4 unit quaternions).
+fn snorm16_attribute(values: impl Iterator<Item = [f32; 4]>) -> Attribute {
+    let mut bytes = Vec::new();
+    let mut count = 0;
+    for v in values {
+        for x in v {
+            bytes.extend_from_slice(&(meshopt::quantize_snorm(x, 16) as i16).to_le_bytes());
+        }
+        count += 1;
+    }
+    Attribute {
+        bytes,
+        stride: 8,
+        component_type: SHORT,
+        normalized: true,
+        type_name: "VEC4",
         count,
         bounds: None,
     }
@@ -719,8 +849,8 @@ fn quantize_positions(s: &Submesh, order: &[u32]) -> (Attribute, Affine3A) {
     }
     let bounds = (!order.is_empty()).then(|| {
         (
-            lo.iter().map(|&x| f64::from(x)).collect(),
-            hi.iter().map(|&x| f64::from(x)).collect(),
+            lo.iter().map(|&x| f32::from(x)).collect(),
+            hi.iter().map(|&x| f32::from(x)).collect(),
         )
     });
     let attribute = Attribute {

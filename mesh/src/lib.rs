@@ -5,11 +5,13 @@
 //!   counts, bounds, expansion and `validate()`.
 //! - [`import`]: glTF/GLB, PLY, OBJ and STL readers behind [`import_file`] and
 //!   [`import_bytes`], with [`Limits`] for untrusted uploads.
+//! - [`bake`]: instances cheaper written out than instanced, merged into shared geometry.
 //! - [`export`]: the GLB writer, with EXT_mesh_gpu_instancing and optional meshopt compression.
 //! - [`transform`]: decomposition of affine transforms into translation, rotation and scale.
 //! - [`stats`]: the summary printed by `horizon mesh stats`.
 //! - [`error`]: the typed errors of import and export.
 
+pub mod bake;
 pub mod error;
 pub mod export;
 pub mod import;

@@ -33,7 +33,14 @@ fn shared_models() -> Vec<PathBuf> {
 }
 
 fn reimport(mesh: &InstancedMesh, compress: bool) -> InstancedMesh {
-    let glb = export_glb(mesh, &ExportOptions { compress }).expect("exports");
+    let glb = export_glb(
+        mesh,
+        &ExportOptions {
+            compress,
+            ..ExportOptions::plain()
+        },
+    )
+    .expect("exports");
     let back =
         import_bytes(&glb, Format::Glb, None, &ImportOptions::default()).expect("re-imports");
     back.mesh.validate().expect("valid");
@@ -160,6 +167,108 @@ fn trs_instances_become_one_gpu_instanced_node() {
     assert_eq!(json["nodes"].as_array().map(Vec::len), Some(1));
     assert!(json["nodes"][0]["extensions"]["EXT_mesh_gpu_instancing"].is_object());
     assert_eq!(reimport(&mesh, false).instances.len(), 2);
+}
+
+fn json_of(glb: &[u8]) -> serde_json::Value {
+    serde_json::from_slice(&gltf::Glb::from_slice(glb).expect("glb").json).expect("json")
+}
+
+#[test]
+fn translated_instances_store_translations_alone() {
+    // Identity rotation and unit scale for every instance: both attributes are left out.
+    let mesh = cubes(&[
+        Affine3A::from_translation(Vec3::Z),
+        Affine3A::from_translation(Vec3::X * 3.0),
+    ]);
+    let json = json_of(&export_glb(&mesh, &ExportOptions::plain()).expect("exports"));
+    let attributes = &json["nodes"][0]["extensions"]["EXT_mesh_gpu_instancing"]["attributes"];
+    let names: Vec<&String> = attributes.as_object().expect("attributes").keys().collect();
+    assert_eq!(names, ["TRANSLATION"]);
+    let back = transforms_by_submesh(&reimport(&mesh, false));
+    assert_eq!(back, transforms_by_submesh(&mesh));
+}
+
+#[test]
+fn accessors_of_one_kind_share_a_buffer_view() {
+    // Three submeshes with positions, normals and UVs, two of them instanced: one view per
+    // kind (stride-12 and stride-8 vertex data, indices, instance data), not one per accessor.
+    let mut mesh = cubes(&[
+        Affine3A::from_rotation_y(0.5),
+        Affine3A::from_translation(Vec3::X * 3.0),
+    ]);
+    let second = mesh.submeshes[0].clone();
+    mesh.submeshes.push(second.clone());
+    mesh.submeshes.push(second);
+    for (submesh, x) in [(1, 6.0), (1, 9.0), (2, 12.0)] {
+        mesh.instances.push(horizon_mesh::Instance {
+            submesh,
+            transform: Affine3A::from_scale_rotation_translation(
+                Vec3::new(1.0, 2.0, 1.0),
+                Quat::from_rotation_z(0.3),
+                Vec3::X * x,
+            ),
+        });
+    }
+    let glb = export_glb(&mesh, &ExportOptions::plain()).expect("exports");
+    let json = json_of(&glb);
+    let accessors = json["accessors"].as_array().expect("accessors").len();
+    let views = json["bufferViews"].as_array().expect("views").len();
+    assert!(accessors > 10, "{accessors} accessors");
+    assert!(views <= 4, "{views} buffer views for {accessors} accessors");
+    // Shortest float text: no widened f32 digits in the document.
+    let text =
+        String::from_utf8(gltf::Glb::from_slice(&glb).expect("glb").json.to_vec()).expect("utf-8");
+    assert!(!text.contains("0000000"), "long float text in {text}");
+    // The meaning survives exactly.
+    let back = reimport(&mesh, false);
+    assert_eq!(
+        back.expanded_triangle_count(),
+        mesh.expanded_triangle_count()
+    );
+    assert_eq!(transforms_by_submesh(&back), transforms_by_submesh(&mesh));
+}
+
+#[test]
+fn short_rotations_stay_within_their_quantization_error() {
+    let transforms: Vec<Affine3A> = (0..20)
+        .map(|k| {
+            Affine3A::from_scale_rotation_translation(
+                Vec3::splat(1.0 + k as f32 * 0.1),
+                Quat::from_euler(
+                    glam::EulerRot::XYZ,
+                    k as f32 * 0.7,
+                    1.0 - k as f32 * 0.3,
+                    0.2,
+                ),
+                Vec3::new(k as f32, 0.0, -2.0 * k as f32),
+            )
+        })
+        .collect();
+    let mesh = cubes(&transforms);
+    let plain = export_glb(&mesh, &ExportOptions::plain()).expect("exports");
+    let short = export_glb(&mesh, &ExportOptions::aggregate()).expect("exports");
+    // 8 bytes saved per instance, less the accessor's `"normalized":true` in the JSON.
+    assert!(
+        short.len() + 8 * 20 <= plain.len() + 32,
+        "{} vs {}",
+        short.len(),
+        plain.len()
+    );
+    let back = import_bytes(&short, Format::Glb, None, &ImportOptions::default()).expect("imports");
+    let back = &transforms_by_submesh(&back.mesh)[0];
+    for (a, b) in transforms.iter().zip(back) {
+        // Rotation within about 3e-5 rad: each axis of the (uniformly scaled) frame moves
+        // by at most about that much of its length.
+        for (u, v) in [
+            (a.matrix3.x_axis, b.matrix3.x_axis),
+            (a.matrix3.y_axis, b.matrix3.y_axis),
+            (a.matrix3.z_axis, b.matrix3.z_axis),
+        ] {
+            let off = (u - v).length() / u.length();
+            assert!(off < 1e-4, "axis {u} came back as {v}");
+        }
+        assert!((a.translation - b.translation).length() < 1e-5);
+    }
 }
 
 #[test]
