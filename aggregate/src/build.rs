@@ -27,7 +27,9 @@ use crate::error::AggregateError;
 use crate::generate::{generate, ExpandedPart, Handoff, NodeInput, PartKey, Placement};
 use crate::options::{AggregateOptions, AtlasPolicy, Method};
 use crate::source::ModelSource;
-use crate::store::{AggregateEntry, AggregateManifest, AggregateStore, KeyHasher, PartList};
+use crate::store::{
+    AggregateEntry, AggregateManifest, AggregateStore, Garbage, KeyHasher, PartList,
+};
 
 /// One node's outcome in a level: its entry (if any), its handoff (if built), whether built.
 type LevelResult = (NodeId, Option<AggregateEntry>, Option<Arc<Handoff>>, bool);
@@ -87,6 +89,9 @@ pub struct BuildReport {
     pub levels: usize,
     /// Per level, root first: aggregates built and the wall time spent on the level.
     pub level_times: Vec<LevelTime>,
+    /// Files of earlier builds that the new manifest no longer names, deleted.
+    #[serde(default)]
+    pub removed: Garbage,
 }
 
 /// One tree level of a rebuild.
@@ -269,14 +274,16 @@ pub fn build_aggregates(
     report.level_times.reverse();
     report.failed = failed.into_inner().unwrap_or_default();
     report.failed.sort();
-    // Stage 4: the manifest, last.
-    store.write_manifest(&AggregateManifest {
+    // Stage 4: the manifest, last; then what it no longer names goes.
+    let manifest = AggregateManifest {
         format: crate::FORMAT,
         options: options.aggregate,
         atlas,
         root_key,
         nodes: entries,
-    })?;
+    };
+    store.write_manifest(&manifest)?;
+    report.removed = store.collect_garbage(&manifest)?;
     report.seconds = start.elapsed().as_secs_f64();
     Ok(report)
 }

@@ -34,7 +34,7 @@ pub use error::AggregateError;
 pub use generate::{generate, ExpandedPart, Handoff, NodeInput, NodeOutput, NodeStats, Placement};
 pub use options::{AggregateOptions, AtlasPolicy, Method};
 pub use source::{InMemoryModels, ModelSource, SourceModel};
-pub use store::{AggregateEntry, AggregateManifest, AggregateStore};
+pub use store::{AggregateEntry, AggregateManifest, AggregateStore, Garbage};
 
 /// Version of the aggregate format written by this build; part of every key. 2: shared buffer
 /// views, shortest float text, baked cheap placements, 16-bit instance rotations.

@@ -12,6 +12,10 @@
 //! unoptimised baseline lives in one, since only its sizes are ever read and its GLBs, each
 //! carrying every source texture below it, would fill gigabytes.
 //!
+//! After a build completes, [`AggregateStore::collect_garbage`] keeps the store at the size of
+//! one build: the journal is rewritten to the manifest's entries, then every GLB and parts
+//! file the manifest does not name is deleted (a crash in between only leaves files behind).
+//!
 //! Files are immutable and content-addressed; a changed aggregate gets a new name. Every
 //! file is written atomically (temporary file, fsync, rename, fsync of the folder), and the
 //! manifest is written last, so a crash mid-build leaves the previous manifest valid and
@@ -48,6 +52,15 @@ pub struct AggregateEntry {
     pub part_keys: PartList,
     /// What building it did.
     pub stats: NodeStats,
+}
+
+/// What [`AggregateStore::collect_garbage`] removed.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Garbage {
+    /// Files deleted.
+    pub files: usize,
+    /// Their bytes.
+    pub bytes: u64,
 }
 
 /// `aggregates/manifest.json`.
@@ -235,6 +248,66 @@ impl AggregateStore {
         Ok(())
     }
 
+    /// Removes what `manifest` no longer needs: the journal is rewritten (atomically) to
+    /// hold just its entries, then every aggregate and parts file it does not name, and every
+    /// temporary file a crashed write left, is deleted. Files the manifest names are never
+    /// touched, so a crash at any point leaves it valid.
+    pub fn collect_garbage(&self, manifest: &AggregateManifest) -> Result<Garbage, AggregateError> {
+        let mut journal = Vec::new();
+        for e in manifest.nodes.values() {
+            journal.extend(
+                serde_json::to_vec(e).map_err(|err| AggregateError::Corrupt {
+                    path: self.journal_path(),
+                    reason: err.to_string(),
+                })?,
+            );
+            journal.push(b'\n');
+        }
+        {
+            // Later appends must go to the new file, not the replaced one.
+            let mut guard = self
+                .journal
+                .lock()
+                .map_err(|_| AggregateError::Tree("journal lock poisoned".into()))?;
+            write_atomically(&self.journal_path(), &journal)?;
+            *guard = None;
+        }
+        let glbs: std::collections::HashSet<&str> =
+            manifest.nodes.values().map(|e| e.glb.as_str()).collect();
+        let parts: std::collections::HashSet<&str> = manifest
+            .nodes
+            .values()
+            .filter_map(|e| e.parts.as_deref())
+            .collect();
+        let mut removed = Garbage::default();
+        for (dir, keep) in [
+            (self.root.clone(), &glbs),
+            (self.root.join("parts"), &parts),
+        ] {
+            let entries = match std::fs::read_dir(&dir) {
+                Ok(entries) => entries,
+                Err(e) if e.kind() == std::io::ErrorKind::NotFound => continue,
+                Err(e) => return Err(AggregateError::io(&dir, e)),
+            };
+            for entry in entries {
+                let entry = entry.map_err(|e| AggregateError::io(&dir, e))?;
+                let name = entry.file_name().to_string_lossy().into_owned();
+                let stale = match name.strip_suffix(".glb") {
+                    Some(hash) if !name.starts_with('.') => !keep.contains(hash),
+                    _ => name.starts_with('.') && name.ends_with(".tmp"),
+                };
+                if stale {
+                    let len = entry.metadata().map(|m| m.len()).unwrap_or(0);
+                    std::fs::remove_file(entry.path())
+                        .map_err(|e| AggregateError::io(entry.path(), e))?;
+                    removed.files += 1;
+                    removed.bytes += len;
+                }
+            }
+        }
+        Ok(removed)
+    }
+
     /// Replaces the manifest atomically.
     pub fn write_manifest(&self, manifest: &AggregateManifest) -> Result<(), AggregateError> {
         let path = self.manifest_path();
@@ -359,6 +432,54 @@ mod tests {
         let known = store.known().expect("known");
         assert_eq!(known.len(), 1);
         assert_eq!(known["k1"], e);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn garbage_collection_keeps_exactly_what_the_manifest_names() {
+        let dir = std::env::temp_dir().join(format!("horizon-gc-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let store = AggregateStore::new(&dir);
+        let parts = |b: &'static [u8]| Some((b, Vec::new()));
+        let old = store
+            .put(
+                "old".into(),
+                b"old glb",
+                parts(b"old parts"),
+                NodeStats::default(),
+            )
+            .expect("put");
+        let kept = store
+            .put(
+                "kept".into(),
+                b"kept glb",
+                parts(b"kept parts"),
+                NodeStats::default(),
+            )
+            .expect("put");
+        std::fs::write(dir.join(".x.glb.1.2.tmp"), b"torn").expect("tmp");
+        let manifest = AggregateManifest {
+            format: crate::FORMAT,
+            options: AggregateOptions::default(),
+            atlas: true,
+            root_key: "kept".into(),
+            nodes: BTreeMap::from([(0, kept.clone())]),
+        };
+        store.write_manifest(&manifest).expect("manifest");
+        let removed = store.collect_garbage(&manifest).expect("gc");
+        assert_eq!(removed.files, 3, "old GLB, old parts, temporary file");
+        assert!(!store.glb(&old.glb).exists());
+        assert!(!store.parts(old.parts.as_deref().expect("parts")).exists());
+        assert!(store.glb(&kept.glb).exists());
+        assert!(store.parts(kept.parts.as_deref().expect("parts")).exists());
+        // The journal now holds the manifest's entries alone, and appends still work.
+        let known = store.known().expect("known");
+        assert_eq!(known.len(), 1);
+        assert_eq!(known["kept"], kept);
+        store
+            .put("new".into(), b"new glb", None, NodeStats::default())
+            .expect("put after gc");
+        assert_eq!(store.known().expect("known").len(), 2);
         let _ = std::fs::remove_dir_all(&dir);
     }
 

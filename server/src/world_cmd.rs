@@ -310,7 +310,7 @@ pub fn build(
         );
         if let Some(a) = &summary.aggregates {
             println!(
-                "aggregates: {} nodes, {} built, {} reused, {} failed; {:.1} MB written, {:.1} MB in all; {:.1} s{}",
+                "aggregates: {} nodes, {} built, {} reused, {} failed; {:.1} MB written, {:.1} MB in all; {:.1} s{}{}",
                 a.nodes,
                 a.built,
                 a.reused,
@@ -318,7 +318,16 @@ pub fn build(
                 a.bytes_built as f64 / 1e6,
                 a.bytes_total as f64 / 1e6,
                 a.seconds,
-                if a.atlas { ", atlased" } else { "" }
+                if a.atlas { ", atlased" } else { "" },
+                if a.removed.files > 0 {
+                    format!(
+                        "; {} files of earlier builds removed ({:.1} MB)",
+                        a.removed.files,
+                        a.removed.bytes as f64 / 1e6
+                    )
+                } else {
+                    String::new()
+                }
             );
         }
     }
