@@ -1,8 +1,9 @@
 //! One node's aggregate (core paper sections 5 to 7): gather the children's representations,
 //! cull what cannot show, dedup near-duplicates (Table 1), merge into one instanced mesh,
-//! simplify with IAS to the node's budget, atlas, bake the placements that cost less written
-//! out than instanced into one submesh (`InstancedMesh::bake_cheap_instances`: fewer draw
-//! calls and less JSON), encode (16-bit instance rotations, `ExportOptions::aggregate`).
+//! simplify with IAS to the node's budget, atlas, merge the parts placed alike and bake the
+//! placements that cost less written out than instanced into one submesh
+//! (`InstancedMesh::merge_coplaced_submeshes`, `bake_cheap_instances`: fewer draw calls and
+//! less JSON), encode (16-bit instance rotations, `ExportOptions::aggregate`).
 //!
 //! What a node hands its parent ([`Handoff`]) is not its final GLB but the simplified
 //! version of every model submesh it drew, in model space. The parent then instances one
@@ -278,8 +279,10 @@ fn generate_optimized(
     } else {
         simplified
     };
-    // Stage 7, bake the cheap placements (single ones, tiny parts) into shared geometry.
-    let out = out.bake_cheap_instances();
+    // Stage 7, one draw per set of placements: parts placed alike (a model's submeshes,
+    // one material after the atlas) merge, and cheap placements (single ones, tiny parts)
+    // are baked into shared geometry.
+    let out = out.merge_coplaced_submeshes().bake_cheap_instances();
     let mut out = finish(input.node, out, handoff, stats)?;
     out.stats.seconds = start.elapsed().as_secs_f64();
     Ok(out)

@@ -37,5 +37,6 @@ pub use source::{InMemoryModels, ModelSource, SourceModel};
 pub use store::{AggregateEntry, AggregateManifest, AggregateStore, Garbage};
 
 /// Version of the aggregate format written by this build; part of every key. 2: shared buffer
-/// views, shortest float text, baked cheap placements, 16-bit instance rotations.
+/// views, shortest float text, co-placed parts merged, cheap placements baked, 16-bit
+/// instance rotations.
 pub const FORMAT: u32 = 2;

@@ -33,6 +33,69 @@ struct Layout {
 }
 
 impl InstancedMesh {
+    /// The same mesh with submeshes of one layout that are placed by exactly the same
+    /// transforms, in the same order, concatenated into one (at the first one's place).
+    pub fn merge_coplaced_submeshes(&self) -> InstancedMesh {
+        let placed = self.instances_by_submesh();
+        // Group by layout and the exact bits of every transform.
+        let mut group_of: BTreeMap<(Layout, Vec<u32>), usize> = BTreeMap::new();
+        let mut groups: Vec<Vec<usize>> = Vec::new();
+        for (s, ks) in placed.iter().enumerate() {
+            if ks.is_empty() {
+                groups.push(vec![s]);
+                continue;
+            }
+            let bits: Vec<u32> = ks
+                .iter()
+                .flat_map(|&k| {
+                    let t = &self.instances[k].transform;
+                    let m = t.matrix3;
+                    [m.x_axis, m.y_axis, m.z_axis, t.translation]
+                        .into_iter()
+                        .flat_map(|v| v.to_array().map(f32::to_bits))
+                })
+                .collect();
+            let next = groups.len();
+            let g = *group_of
+                .entry((layout(&self.submeshes[s]), bits))
+                .or_insert(next);
+            if g == next {
+                groups.push(vec![s]);
+            } else {
+                groups[g].push(s);
+            }
+        }
+        if groups.len() == self.submeshes.len() {
+            return self.clone();
+        }
+        let mut out = InstancedMesh {
+            materials: self.materials.clone(),
+            textures: self.textures.clone(),
+            ..InstancedMesh::default()
+        };
+        for (g, members) in groups.iter().enumerate() {
+            let first = &self.submeshes[members[0]];
+            let mut merged = Submesh {
+                positions: Vec::new(),
+                normals: first.normals.as_ref().map(|_| Vec::new()),
+                uvs: first.uvs.as_ref().map(|_| Vec::new()),
+                colors: first.colors.as_ref().map(|_| Vec::new()),
+                indices: Vec::new(),
+                material: first.material,
+            };
+            for &s in members {
+                append_placed(&mut merged, &self.submeshes[s], &Affine3A::IDENTITY);
+            }
+            out.submeshes.push(merged);
+            out.instances
+                .extend(placed[members[0]].iter().map(|&k| Instance {
+                    submesh: g,
+                    transform: self.instances[k].transform,
+                }));
+        }
+        out
+    }
+
     /// The same mesh with every placement that is cheaper baked than instanced (see the module
     /// comment) merged into one world-space submesh per layout. A layout with a single such
     /// placement is left as it was. Kept submeshes keep their order; baked ones follow.
@@ -250,6 +313,39 @@ mod tests {
             out.expanded_triangle_count(),
             mesh.expanded_triangle_count()
         );
+    }
+
+    #[test]
+    fn parts_placed_alike_become_one_submesh() {
+        let at: Vec<Affine3A> = (0..5)
+            .map(|k| {
+                Affine3A::from_rotation_translation(
+                    glam::Quat::from_rotation_y(k as f32),
+                    Vec3::X * k as f32,
+                )
+            })
+            .collect();
+        let mut roof = quad();
+        roof.positions.iter_mut().for_each(|p| p.z += 1.0);
+        let mut pairs: Vec<(usize, Affine3A)> = Vec::new();
+        for &t in &at {
+            pairs.push((0, t));
+            pairs.push((1, t));
+        }
+        // A third part placed differently stays apart.
+        pairs.push((2, Affine3A::from_translation(Vec3::Y)));
+        pairs.push((2, Affine3A::from_translation(Vec3::Z)));
+        let mesh = placed(vec![quad(), roof, quad()], &pairs);
+        let out = mesh.merge_coplaced_submeshes();
+        out.validate().expect("valid");
+        assert_eq!(out.submeshes.len(), 2);
+        assert_eq!(out.instances.len(), 7);
+        assert_eq!(
+            out.expanded_triangle_count(),
+            mesh.expanded_triangle_count()
+        );
+        let bounds = |m: &InstancedMesh| m.bounds();
+        assert_eq!(bounds(&out), bounds(&mesh));
     }
 
     #[test]
