@@ -38,5 +38,5 @@ pub use store::{AggregateEntry, AggregateManifest, AggregateStore, Garbage};
 
 /// Version of the aggregate format written by this build; part of every key. 2: shared buffer
 /// views, shortest float text, co-placed parts merged, cheap placements baked, 16-bit
-/// instance rotations.
-pub const FORMAT: u32 = 2;
+/// instance rotations. 3: baked mirrored placements keep outward normals.
+pub const FORMAT: u32 = 3;

@@ -12,7 +12,7 @@
 
 use std::collections::BTreeMap;
 
-use glam::{Affine3A, Mat3, Vec3};
+use glam::{Affine3A, Mat3};
 
 use crate::model::{Instance, InstancedMesh, Submesh};
 
@@ -84,7 +84,7 @@ impl InstancedMesh {
                 material: first.material,
             };
             for &s in members {
-                append_placed(&mut merged, &self.submeshes[s], &Affine3A::IDENTITY);
+                merged.append_placed(&self.submeshes[s], &Affine3A::IDENTITY);
             }
             out.submeshes.push(merged);
             out.instances
@@ -150,7 +150,7 @@ impl InstancedMesh {
                     material: l.material,
                     ..Submesh::default()
                 });
-                append_placed(target, &self.submeshes[inst.submesh], &inst.transform);
+                target.append_placed(&self.submeshes[inst.submesh], &inst.transform);
             }
         }
         for sub in merged.into_values() {
@@ -186,45 +186,74 @@ fn cheaper_baked(s: &Submesh, instances: u64) -> bool {
     instances * geometry <= geometry + instances * INSTANCE_BYTES + DRAW_BYTES
 }
 
-/// Appends `sub` placed by `t` to `target`, whose layout matches.
-fn append_placed(target: &mut Submesh, sub: &Submesh, t: &Affine3A) {
-    let base = target.positions.len() as u32;
-    target
-        .positions
-        .extend(sub.positions.iter().map(|&p| t.transform_point3(p)));
-    if let (Some(out), Some(normals)) = (target.normals.as_mut(), &sub.normals) {
+impl Submesh {
+    /// Appends `other` placed by `t` (its layout, i.e. which attribute arrays it has, must
+    /// match): positions transformed, normals by the inverse transpose (computed as the
+    /// cofactor matrix times the sign of the determinant, which stays defined for a singular
+    /// `t`; a normal that vanishes stays zero), UVs and colours copied, and the winding
+    /// reversed when `t` mirrors, as [`InstancedMesh::expand`] does.
+    pub fn append_placed(&mut self, other: &Submesh, t: &Affine3A) {
+        let base = self.positions.len() as u32;
+        self.positions
+            .extend(other.positions.iter().map(|&p| t.transform_point3(p)));
         let m = Mat3::from(t.matrix3);
-        let cofactor = Mat3::from_cols(
-            m.y_axis.cross(m.z_axis),
-            m.z_axis.cross(m.x_axis),
-            m.x_axis.cross(m.y_axis),
-        );
-        out.extend(
-            normals
-                .iter()
-                .map(|&n| (cofactor * n).try_normalize().unwrap_or(Vec3::Z)),
-        );
-    }
-    if let (Some(out), Some(uvs)) = (target.uvs.as_mut(), &sub.uvs) {
-        out.extend_from_slice(uvs);
-    }
-    if let (Some(out), Some(colors)) = (target.colors.as_mut(), &sub.colors) {
-        out.extend_from_slice(colors);
-    }
-    let mirrored = t.matrix3.determinant() < 0.0;
-    for tri in sub.indices.chunks_exact(3) {
-        let tri = if mirrored {
-            [tri[0], tri[2], tri[1]]
-        } else {
-            [tri[0], tri[1], tri[2]]
-        };
-        target.indices.extend(tri.iter().map(|&i| base + i));
+        let det = m.determinant();
+        if let (Some(out), Some(normals)) = (self.normals.as_mut(), &other.normals) {
+            let normal_matrix = Mat3::from_cols(
+                m.y_axis.cross(m.z_axis),
+                m.z_axis.cross(m.x_axis),
+                m.x_axis.cross(m.y_axis),
+            ) * if det < 0.0 { -1.0 } else { 1.0 };
+            out.extend(
+                normals
+                    .iter()
+                    .map(|&n| (normal_matrix * n).normalize_or_zero()),
+            );
+        }
+        if let (Some(out), Some(uvs)) = (self.uvs.as_mut(), &other.uvs) {
+            out.extend_from_slice(uvs);
+        }
+        if let (Some(out), Some(colors)) = (self.colors.as_mut(), &other.colors) {
+            out.extend_from_slice(colors);
+        }
+        for tri in other.indices.chunks_exact(3) {
+            let tri = if det < 0.0 {
+                [tri[0], tri[2], tri[1]]
+            } else {
+                [tri[0], tri[1], tri[2]]
+            };
+            self.indices.extend(tri.iter().map(|&i| base + i));
+        }
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use glam::Vec3;
+
+    #[test]
+    fn a_mirrored_normal_points_out_of_the_mirrored_surface() {
+        // A +x facing quad at x = 1, mirrored in x, lands at x = -1 facing -x.
+        let mut wall = quad();
+        wall.positions = vec![
+            Vec3::X,
+            Vec3::X + Vec3::Y,
+            Vec3::X + Vec3::Y + Vec3::Z,
+            Vec3::X + Vec3::Z,
+        ];
+        wall.normals = Some(vec![Vec3::X; 4]);
+        let mut out = Submesh {
+            normals: Some(Vec::new()),
+            ..Submesh::default()
+        };
+        out.append_placed(&wall, &Affine3A::from_scale(Vec3::new(-2.0, 1.0, 1.0)));
+        assert_eq!(out.normals.as_ref().expect("normals")[0], -Vec3::X);
+        assert_eq!(out.positions[0], -2.0 * Vec3::X);
+        // And the reversed winding's geometric normal agrees.
+        let [a, b, c] = [0, 1, 2].map(|k| out.positions[out.indices[k] as usize]);
+        assert!((b - a).cross(c - a).dot(-Vec3::X) > 0.0);
+    }
 
     fn quad() -> Submesh {
         Submesh {
@@ -273,8 +302,11 @@ mod tests {
                 assert!((x - y).length() < 1e-6, "{x} vs {y}");
             }
         }
-        // Normals follow the placement: the rotated quad's normal turns with it.
+        // Normals follow the placement: the rotated quad's normal turns with it, and the
+        // mirrored one (mirrored in x, so its +z normal stays +z) keeps facing out.
         let normals = out.submeshes[0].normals.as_ref().expect("normals");
+        assert_eq!(normals[4], Vec3::Z);
+        assert_eq!(normals[0], Vec3::Z);
         assert!(
             (normals[8] - Affine3A::from_rotation_x(1.0).transform_vector3(Vec3::Z)).length()
                 < 1e-6

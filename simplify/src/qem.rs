@@ -5,8 +5,9 @@ use glam::Affine3A;
 use horizon_mesh::{Instance, InstancedMesh, Submesh};
 
 /// Bakes every instance into its submesh's vertices: one submesh per input submesh, holding
-/// all its instances, placed once by the identity. Normals go through the inverse transpose,
-/// and mirrored instances flip their winding, as [`InstancedMesh::expand`] does.
+/// all its instances, placed once by the identity ([`Submesh::append_placed`]: normals through
+/// the inverse transpose, mirrored instances with their winding flipped, as
+/// [`InstancedMesh::expand`] does).
 pub fn expand_to_single_instance(mesh: &InstancedMesh) -> InstancedMesh {
     let by_submesh = mesh.instances_by_submesh();
     let mut submeshes = Vec::new();
@@ -24,29 +25,7 @@ pub fn expand_to_single_instance(mesh: &InstancedMesh) -> InstancedMesh {
             material: sub.material,
         };
         for &k in placed {
-            let m = mesh.instances[k].transform;
-            let base = out.positions.len() as u32;
-            out.positions
-                .extend(sub.positions.iter().map(|&p| m.transform_point3(p)));
-            if let (Some(dst), Some(src)) = (out.normals.as_mut(), sub.normals.as_ref()) {
-                let normal_matrix = m.matrix3.inverse().transpose();
-                dst.extend(src.iter().map(|&n| (normal_matrix * n).normalize_or_zero()));
-            }
-            if let (Some(dst), Some(src)) = (out.uvs.as_mut(), sub.uvs.as_ref()) {
-                dst.extend_from_slice(src);
-            }
-            if let (Some(dst), Some(src)) = (out.colors.as_mut(), sub.colors.as_ref()) {
-                dst.extend_from_slice(src);
-            }
-            let mirrored = m.matrix3.determinant() < 0.0;
-            for t in sub.indices.chunks_exact(3) {
-                let t = if mirrored {
-                    [t[0], t[2], t[1]]
-                } else {
-                    [t[0], t[1], t[2]]
-                };
-                out.indices.extend(t.map(|i| base + i));
-            }
+            out.append_placed(sub, &mesh.instances[k].transform);
         }
         submeshes.push(out);
     }
