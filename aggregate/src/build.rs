@@ -55,6 +55,10 @@ pub struct BuildOptions {
     /// upper aggregates (world-space merges of everything below) do not fit in memory on a
     /// large world and are in no measured cut.
     pub only: Option<BTreeSet<u32>>,
+    /// Delete, once the new manifest is written, every file of the store it does not name
+    /// ([`AggregateStore::collect_garbage`]). Off only for a build whose manifest is about
+    /// to be replaced by an earlier one (the incremental benchmark restores the full build's).
+    pub collect_garbage: bool,
 }
 
 /// Progress of a rebuild, for a progress bar.
@@ -283,7 +287,9 @@ pub fn build_aggregates(
         nodes: entries,
     };
     store.write_manifest(&manifest)?;
-    report.removed = store.collect_garbage(&manifest)?;
+    if options.collect_garbage {
+        report.removed = store.collect_garbage(&manifest)?;
+    }
     report.seconds = start.elapsed().as_secs_f64();
     Ok(report)
 }

@@ -198,6 +198,7 @@ fn options(w: &World) -> BuildOptions {
         world_textures: w.models.texture_totals(),
         stop_after: None,
         only: None,
+        collect_garbage: true,
     }
 }
 
@@ -337,6 +338,63 @@ fn adding_objects_rebuilds_only_their_ancestors() {
         rebuilt.len()
     );
     assert!(report.built < bvh.node_count());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A completed build leaves only what its manifest names; a build that skips the collection
+/// can hand the store back to the earlier manifest, which then finds every file it names.
+#[test]
+fn a_build_keeps_one_build_on_disk_and_an_earlier_manifest_can_come_back() {
+    let w = world();
+    let mut bvh = tree(&w);
+    let dir = temp("gc");
+    let store = AggregateStore::new(&dir);
+    let glbs = |dir: &std::path::Path| {
+        std::fs::read_dir(dir)
+            .expect("store")
+            .filter_map(|e| e.ok())
+            .filter(|e| e.file_name().to_string_lossy().ends_with(".glb"))
+            .count()
+    };
+    let names_all = |m: &horizon_aggregate::AggregateManifest| {
+        m.nodes.values().all(|e| {
+            store.glb(&e.glb).exists() && e.parts.as_ref().is_none_or(|p| store.parts(p).exists())
+        })
+    };
+    build_aggregates(&bvh, &w.models, &store, &options(&w), &|_| {}).expect("first build");
+    let first = store.manifest().expect("read").expect("manifest");
+    let distinct = |m: &horizon_aggregate::AggregateManifest| {
+        m.nodes
+            .values()
+            .map(|e| e.glb.clone())
+            .collect::<BTreeSet<_>>()
+            .len()
+    };
+    assert_eq!(glbs(&dir), distinct(&first));
+    // An insert, rebuilt without collection: both builds' files are there.
+    let t = Affine3A::from_translation(Vec3::new(1.5, 0.0, 1.5));
+    bvh.insert(&new_object(&w, 0, t)).expect("insert");
+    let keep = BuildOptions {
+        collect_garbage: false,
+        ..options(&w)
+    };
+    let report = build_aggregates(&bvh, &w.models, &store, &keep, &|_| {}).expect("rebuild");
+    assert!(report.built > 0);
+    assert_eq!(report.removed.files, 0);
+    let second = store.manifest().expect("read").expect("manifest");
+    assert!(names_all(&first) && names_all(&second));
+    // Back to the first manifest, then collect: it is whole, and the second's own files go.
+    store.write_manifest(&first).expect("restore");
+    let removed = store.collect_garbage(&first).expect("gc");
+    assert!(removed.files > 0);
+    assert!(names_all(&first));
+    assert_eq!(glbs(&dir), distinct(&first));
+    // A collecting build over the tree with the insert keeps exactly its own files.
+    let report = build_aggregates(&bvh, &w.models, &store, &options(&w), &|_| {}).expect("again");
+    let third = store.manifest().expect("read").expect("manifest");
+    assert!(report.removed.files > 0);
+    assert!(names_all(&third));
+    assert_eq!(glbs(&dir), distinct(&third));
     let _ = std::fs::remove_dir_all(&dir);
 }
 

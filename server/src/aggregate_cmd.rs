@@ -91,7 +91,7 @@ pub fn build_into(
     options: AggregateOptions,
     what: &str,
 ) -> anyhow::Result<BuildReport> {
-    build_some_into(bvh, models, store, options, None, what)
+    build_some_into(bvh, models, store, options, None, true, what)
 }
 
 /// Builds the aggregates of `only` (and every node below them; all nodes for `None`) into
@@ -102,6 +102,7 @@ pub fn build_some_into(
     store: &AggregateStore,
     options: AggregateOptions,
     only: Option<BTreeSet<u32>>,
+    collect_garbage: bool,
     what: &str,
 ) -> anyhow::Result<BuildReport> {
     let bar = ProgressBar::new(what);
@@ -114,6 +115,7 @@ pub fn build_some_into(
             world_textures: models.texture_totals(),
             stop_after: None,
             only,
+            collect_garbage,
         },
         &|p| bar.show(p),
     )?;
@@ -272,6 +274,7 @@ pub fn report(
         &base_store,
         baseline_options,
         Some(shown),
+        true,
         "baseline",
     )?;
     let baseline_seconds = if base_report.built > 0 {
@@ -528,7 +531,8 @@ pub fn bench(dir: &Path, insert: usize, seed: u64, out: Option<&Path>) -> anyhow
             at = bvh.node(n).and_then(|r| r.parent());
         }
     }
-    let incremental = build_into(&bvh, &models, &store, options, "incremental")?;
+    // Its garbage collection waits: the full build's manifest comes back below.
+    let incremental = build_some_into(&bvh, &models, &store, options, None, false, "incremental")?;
     let after = store
         .manifest()?
         .context("incremental build wrote no manifest")?;
@@ -543,6 +547,7 @@ pub fn bench(dir: &Path, insert: usize, seed: u64, out: Option<&Path>) -> anyhow
     let rebuild_bound = 2 * insert * (bvh.height() as usize + 1);
     // The world on disk is still the one without the inserted objects.
     store.write_manifest(&full_manifest)?;
+    store.collect_garbage(&full_manifest)?;
     let result = AggregateBench {
         world: manifest.name.clone(),
         objects: bvh.len() - insert,
