@@ -6,7 +6,8 @@ join download of ten seeded viewpoints (`horizon report --json`), with the query
 same cuts (entries and aggregates per cut; `horizon sweep` gives nodes visited over the full
 grid, in figure5.md). Writes bench/results/NAME.{md,json} (NAME default figure6).
 
-Usage: figure6.py HORIZON_BINARY DIR [DIR...] [--mu 0,0.4,0.8,1] [--w 0.2] [--name NAME]"""
+Usage: figure6.py HORIZON_BINARY DIR [DIR...] [--mu 0,0.4,0.8,1] [--w 0.2] [--name NAME]
+       [--rows FILE]   (start from the rows of an earlier run's JSON, e.g. to render it again)"""
 import json
 import pathlib
 import subprocess
@@ -25,10 +26,13 @@ def run(cmd):
 
 def main(argv):
     horizon, rest = argv[0], argv[1:]
-    mus, ws, dirs, out_name = [0.0, 0.4, 0.8, 1.0], [0.2], [], "figure6"
+    mus, ws, dirs, out_name, rows_from = [0.0, 0.4, 0.8, 1.0], [0.2], [], "figure6", None
     k = 0
     while k < len(rest):
-        if rest[k] == "--name":
+        if rest[k] == "--rows":
+            rows_from = rest[k + 1]
+            k += 2
+        elif rest[k] == "--name":
             out_name = rest[k + 1]
             k += 2
         elif rest[k] == "--mu":
@@ -40,7 +44,7 @@ def main(argv):
         else:
             dirs.append(rest[k])
             k += 1
-    rows = []
+    rows = json.loads(pathlib.Path(rows_from).read_text()) if rows_from else []
     for d in dirs:
         name = json.loads((pathlib.Path(d) / "world.json").read_text())["name"]
         for mu in mus:
@@ -67,6 +71,11 @@ def main(argv):
                 print(json.dumps(row), flush=True)
     out = ROOT / "bench" / "results"
     out.mkdir(parents=True, exist_ok=True)
+    # Next to the query cost of the BVH sweep (figure5.md, `horizon sweep`), where it has the
+    # same world and (mu, w).
+    cost = figure5_costs(out / "figure5.md")
+    for r in rows:
+        r["nodes_visited"] = cost.get((r["world"], r["mu"], r["w"]))
     (out / f"{out_name}.json").write_text(json.dumps(rows, indent=1))
     lines = [
         "# Figure 6: join download over mu and w",
@@ -75,16 +84,32 @@ def main(argv):
         "10 seeded viewpoints, Omega_min 1e-3, at most 4000 entries per cut. Query cost (entries",
         "and aggregates per cut) from the same cuts; the nodes-visited cost is in figure5.md.",
         "",
-        "| world | mu | w | join MB (ours) | join MB (unoptimised) | naive MB | entries/cut | aggregates/cut | draw calls/cut | aggregate build s |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        "| world | mu | w | join MB (ours) | join MB (unoptimised) | naive MB | nodes visited/cut (figure5.md) | entries/cut | aggregates/cut | draw calls/cut | aggregate build s |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         lines.append(
             f"| {r['world']} | {r['mu']} | {r['w']} | {r['join_bytes_mean']/1e6:.2f} | "
             f"{r['unoptimized_join_bytes_mean']/1e6:.2f} | {r['naive_bytes']/1e6:.2f} | "
+            f"{'-' if r['nodes_visited'] is None else format(r['nodes_visited'], '.1f')} | "
             f"{r['entries_mean']:.0f} | {r['aggregates_mean']:.0f} | {r['draw_calls_mean']:.0f} | {r['build_seconds']:.1f} |"
         )
     (out / f"{out_name}.md").write_text("\n".join(lines) + "\n")
+
+
+def figure5_costs(path):
+    """(world, mu, w) -> mean nodes visited per cut of the similarity tree, from figure5.md."""
+    cost = {}
+    if not path.exists():
+        return cost
+    for line in path.read_text().splitlines():
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if len(cells) >= 8 and cells[1] == "similarity":
+            try:
+                cost[(cells[0], float(cells[2]), float(cells[3]))] = float(cells[7])
+            except ValueError:
+                pass
+    return cost
 
 
 if __name__ == "__main__":
