@@ -107,11 +107,6 @@ impl AggregateStore {
         }
     }
 
-    /// Whether this store writes aggregate GLBs (false for [`AggregateStore::measuring`]).
-    pub fn keeps_glbs(&self) -> bool {
-        self.keep_glbs
-    }
-
     /// The folder.
     pub fn root(&self) -> &Path {
         &self.root
@@ -181,11 +176,15 @@ impl AggregateStore {
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
             Err(e) => return Err(AggregateError::io(path, e)),
         }
-        out.retain(|_, e| {
-            (!self.keep_glbs || self.glb(&e.glb).exists())
-                && e.parts.as_ref().is_none_or(|p| self.parts(p).exists())
-        });
+        out.retain(|_, e| self.holds(e));
         Ok(out)
+    }
+
+    /// Whether every file `entry` names is in the store (for a measuring store, whose GLBs
+    /// are never written, its parts file).
+    pub fn holds(&self, entry: &AggregateEntry) -> bool {
+        (!self.keep_glbs || self.glb(&entry.glb).exists())
+            && entry.parts.as_ref().is_none_or(|p| self.parts(p).exists())
     }
 
     /// Stores an aggregate's GLB (unless the store is measuring) and parts, then journals its
@@ -220,18 +219,30 @@ impl AggregateStore {
         Ok(entry)
     }
 
-    /// Appends one entry to the journal and flushes it.
-    fn journal(&self, entry: &AggregateEntry) -> Result<(), AggregateError> {
-        let path = self.journal_path();
+    /// One journal line: the entry as JSON and a newline.
+    fn journal_line(&self, entry: &AggregateEntry) -> Result<Vec<u8>, AggregateError> {
         let mut line = serde_json::to_vec(entry).map_err(|e| AggregateError::Corrupt {
-            path: path.clone(),
+            path: self.journal_path(),
             reason: e.to_string(),
         })?;
         line.push(b'\n');
-        let mut guard = self
-            .journal
+        Ok(line)
+    }
+
+    /// The open journal file (`None` until the first append), locked.
+    fn lock_journal(
+        &self,
+    ) -> Result<std::sync::MutexGuard<'_, Option<std::fs::File>>, AggregateError> {
+        self.journal
             .lock()
-            .map_err(|_| AggregateError::Tree("journal lock poisoned".into()))?;
+            .map_err(|_| AggregateError::Tree("journal lock poisoned".into()))
+    }
+
+    /// Appends one entry to the journal and flushes it.
+    fn journal(&self, entry: &AggregateEntry) -> Result<(), AggregateError> {
+        let path = self.journal_path();
+        let line = self.journal_line(entry)?;
+        let mut guard = self.lock_journal()?;
         if guard.is_none() {
             std::fs::create_dir_all(&self.root).map_err(|e| AggregateError::io(&self.root, e))?;
             let file = std::fs::OpenOptions::new()
@@ -255,20 +266,11 @@ impl AggregateStore {
     pub fn collect_garbage(&self, manifest: &AggregateManifest) -> Result<Garbage, AggregateError> {
         let mut journal = Vec::new();
         for e in manifest.nodes.values() {
-            journal.extend(
-                serde_json::to_vec(e).map_err(|err| AggregateError::Corrupt {
-                    path: self.journal_path(),
-                    reason: err.to_string(),
-                })?,
-            );
-            journal.push(b'\n');
+            journal.extend(self.journal_line(e)?);
         }
         {
             // Later appends must go to the new file, not the replaced one.
-            let mut guard = self
-                .journal
-                .lock()
-                .map_err(|_| AggregateError::Tree("journal lock poisoned".into()))?;
+            let mut guard = self.lock_journal()?;
             write_atomically(&self.journal_path(), &journal)?;
             *guard = None;
         }

@@ -356,11 +356,8 @@ fn a_build_keeps_one_build_on_disk_and_an_earlier_manifest_can_come_back() {
             .filter(|e| e.file_name().to_string_lossy().ends_with(".glb"))
             .count()
     };
-    let names_all = |m: &horizon_aggregate::AggregateManifest| {
-        m.nodes.values().all(|e| {
-            store.glb(&e.glb).exists() && e.parts.as_ref().is_none_or(|p| store.parts(p).exists())
-        })
-    };
+    let names_all =
+        |m: &horizon_aggregate::AggregateManifest| m.nodes.values().all(|e| store.holds(e));
     build_aggregates(&bvh, &w.models, &store, &options(&w), &|_| {}).expect("first build");
     let first = store.manifest().expect("read").expect("manifest");
     let distinct = |m: &horizon_aggregate::AggregateManifest| {

@@ -7,8 +7,8 @@
 //! is cheaper written out in world space: [`InstancedMesh::bake_cheap_instances`] moves every
 //! such placement into one baked submesh per material and attribute layout, drawn by a single
 //! identity instance. What the mesh shows does not change: positions are transformed,
-//! normals by the cofactor matrix, and mirrored placements get their winding reversed (as
-//! [`InstancedMesh::expand`] does).
+//! normals by the inverse transpose, and mirrored placements get their winding reversed (as
+//! [`InstancedMesh::expand`] does; [`Submesh::append_placed`]).
 
 use std::collections::BTreeMap;
 
@@ -74,15 +74,7 @@ impl InstancedMesh {
             ..InstancedMesh::default()
         };
         for (g, members) in groups.iter().enumerate() {
-            let first = &self.submeshes[members[0]];
-            let mut merged = Submesh {
-                positions: Vec::new(),
-                normals: first.normals.as_ref().map(|_| Vec::new()),
-                uvs: first.uvs.as_ref().map(|_| Vec::new()),
-                colors: first.colors.as_ref().map(|_| Vec::new()),
-                indices: Vec::new(),
-                material: first.material,
-            };
+            let mut merged = empty(layout(&self.submeshes[members[0]]));
             for &s in members {
                 merged.append_placed(&self.submeshes[s], &Affine3A::IDENTITY);
             }
@@ -143,13 +135,7 @@ impl InstancedMesh {
         let mut merged: BTreeMap<Layout, Submesh> = BTreeMap::new();
         for inst in &self.instances {
             if let Some(l) = baked(inst.submesh) {
-                let target = merged.entry(l).or_insert_with(|| Submesh {
-                    normals: l.normals.then(Vec::new),
-                    uvs: l.uvs.then(Vec::new),
-                    colors: l.colors.then(Vec::new),
-                    material: l.material,
-                    ..Submesh::default()
-                });
+                let target = merged.entry(l).or_insert_with(|| empty(l));
                 target.append_placed(&self.submeshes[inst.submesh], &inst.transform);
             }
         }
@@ -170,6 +156,17 @@ fn layout(s: &Submesh) -> Layout {
         normals: s.normals.is_some(),
         uvs: s.uvs.is_some(),
         colors: s.colors.is_some(),
+    }
+}
+
+/// A submesh of layout `l` with no vertices yet.
+fn empty(l: Layout) -> Submesh {
+    Submesh {
+        normals: l.normals.then(Vec::new),
+        uvs: l.uvs.then(Vec::new),
+        colors: l.colors.then(Vec::new),
+        material: l.material,
+        ..Submesh::default()
     }
 }
 

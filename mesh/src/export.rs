@@ -371,7 +371,7 @@ impl GlbWriter {
                 .iter()
                 .all(|t| t.cmpge(glam::Vec2::ZERO).all() && t.cmple(glam::Vec2::ONE).all());
             let a = if self.compress && in_unit {
-                unorm16_attribute(values)
+                norm16_attribute(values, false)
             } else {
                 float_attribute(values, false)
             };
@@ -384,7 +384,7 @@ impl GlbWriter {
                 .iter()
                 .map(|&v| colors[v as usize].clamp(Vec4::ZERO, Vec4::ONE).to_array());
             let a = if self.compress {
-                unorm16_attribute(values)
+                norm16_attribute(values, false)
             } else {
                 float_attribute(values, false)
             };
@@ -472,20 +472,14 @@ impl GlbWriter {
                 self.extensions_used.insert("KHR_texture_transform");
                 info["extensions"] = json!({"KHR_texture_transform": {
                     "offset": numbers(&x.offset.to_array()),
-                    "rotation": numbers(&[x.rotation])[0].clone(),
+                    "rotation": number(x.rotation),
                     "scale": numbers(&x.scale.to_array()),
                 }});
             }
             pbr.insert("baseColorTexture".into(), info);
         }
-        pbr.insert(
-            "metallicFactor".into(),
-            numbers(&[unit(m.metallic_factor)])[0].clone(),
-        );
-        pbr.insert(
-            "roughnessFactor".into(),
-            numbers(&[unit(m.roughness_factor)])[0].clone(),
-        );
+        pbr.insert("metallicFactor".into(), number(unit(m.metallic_factor)));
+        pbr.insert("roughnessFactor".into(), number(unit(m.roughness_factor)));
         let mut out = Map::new();
         if let Some(name) = &m.name {
             out.insert("name".into(), json!(name));
@@ -495,7 +489,7 @@ impl GlbWriter {
             AlphaMode::Opaque => {}
             AlphaMode::Mask { cutoff } => {
                 out.insert("alphaMode".into(), json!("MASK"));
-                out.insert("alphaCutoff".into(), numbers(&[cutoff.max(0.0)])[0].clone());
+                out.insert("alphaCutoff".into(), number(cutoff.max(0.0)));
             }
             AlphaMode::Blend => {
                 out.insert("alphaMode".into(), json!("BLEND"));
@@ -550,7 +544,7 @@ impl GlbWriter {
         {
             let rotations = trs.iter().map(|x| x.rotation.to_array());
             let r = if self.short_rotations {
-                snorm16_attribute(rotations)
+                norm16_attribute(rotations, true)
             } else {
                 float_attribute(rotations, false)
             };
@@ -675,16 +669,16 @@ impl GlbWriter {
     }
 }
 
-/// f32 values as JSON numbers in their shortest round-trip form ("0.15", not
+/// An f32 as a JSON number in its shortest round-trip form ("0.15", not
 /// "0.15000000596046448", which is what widening to f64 prints): a reader parsing the text as
 /// f32 gets the same value back.
-fn numbers<T: Copy + Into<f64> + std::fmt::Display>(values: &[T]) -> Value {
-    Value::Array(
-        values
-            .iter()
-            .map(|&x| json!(x.to_string().parse::<f64>().unwrap_or_else(|_| x.into())))
-            .collect(),
-    )
+fn number(x: f32) -> Value {
+    json!(x.to_string().parse::<f64>().unwrap_or(f64::from(x)))
+}
+
+/// [`number`] for each value, as a JSON array.
+fn numbers(values: &[f32]) -> Value {
+    Value::Array(values.iter().map(|&x| number(x)).collect())
 }
 
 fn contains_null(v: &Value) -> bool {
@@ -777,41 +771,29 @@ fn snorm8_attribute(values: impl Iterator<Item = [f32; 3]>) -> Attribute {
     }
 }
 
-/// Values in [-1, 1] as signed normalized 16-bit integers (VEC4 unit quaternions).
-fn snorm16_attribute(values: impl Iterator<Item = [f32; 4]>) -> Attribute {
+/// Values as normalized 16-bit integers (VEC2 or VEC4, already aligned): signed for values in
+/// [-1, 1] (unit quaternions), unsigned for values in [0, 1] (UVs, colours).
+fn norm16_attribute<const N: usize>(
+    values: impl Iterator<Item = [f32; N]>,
+    signed: bool,
+) -> Attribute {
     let mut bytes = Vec::new();
     let mut count = 0;
     for v in values {
         for x in v {
-            bytes.extend_from_slice(&(meshopt::quantize_snorm(x, 16) as i16).to_le_bytes());
-        }
-        count += 1;
-    }
-    Attribute {
-        bytes,
-        stride: 8,
-        component_type: SHORT,
-        normalized: true,
-        type_name: "VEC4",
-        count,
-        bounds: None,
-    }
-}
-
-/// Values in [0, 1] as unsigned normalized 16-bit integers (VEC2 or VEC4, already aligned).
-fn unorm16_attribute<const N: usize>(values: impl Iterator<Item = [f32; N]>) -> Attribute {
-    let mut bytes = Vec::new();
-    let mut count = 0;
-    for v in values {
-        for x in v {
-            bytes.extend_from_slice(&(meshopt::quantize_unorm(x, 16) as u16).to_le_bytes());
+            let code = if signed {
+                meshopt::quantize_snorm(x, 16) as i16 as u16
+            } else {
+                meshopt::quantize_unorm(x, 16) as u16
+            };
+            bytes.extend_from_slice(&code.to_le_bytes());
         }
         count += 1;
     }
     Attribute {
         bytes,
         stride: 2 * N,
-        component_type: UNSIGNED_SHORT,
+        component_type: if signed { SHORT } else { UNSIGNED_SHORT },
         normalized: true,
         type_name: type_name(N),
         count,

@@ -99,11 +99,7 @@ fn encode_normal(n: DVec3) -> [f32; 2] {
         return NO_NORMAL;
     }
     let (x, y) = (n.x / l1, n.y / l1);
-    let (x, y) = if n.z < 0.0 {
-        ((1.0 - y.abs()) * x.signum(), (1.0 - x.abs()) * y.signum())
-    } else {
-        (x, y)
-    };
+    let (x, y) = if n.z < 0.0 { fold(x, y) } else { (x, y) };
     [x as f32, y as f32]
 }
 
@@ -115,12 +111,14 @@ fn decode_normal(e: [f32; 2]) -> Option<DVec3> {
     }
     let (x, y) = (f64::from(e[0]), f64::from(e[1]));
     let z = 1.0 - x.abs() - y.abs();
-    let (x, y) = if z < 0.0 {
-        ((1.0 - y.abs()) * x.signum(), (1.0 - x.abs()) * y.signum())
-    } else {
-        (x, y)
-    };
+    let (x, y) = if z < 0.0 { fold(x, y) } else { (x, y) };
     Some(DVec3::new(x, y, z))
+}
+
+/// The octahedron's lower half folded over the diagonals onto the square's corners, and back:
+/// the map is its own inverse.
+fn fold(x: f64, y: f64) -> (f64, f64) {
+    ((1.0 - y.abs()) * x.signum(), (1.0 - x.abs()) * y.signum())
 }
 
 #[derive(Debug, Clone)]
