@@ -236,6 +236,7 @@ fn generate_optimized(
             }
         }
     }
+    let material_keys = std::mem::take(&mut merge.material_keys);
     let merged = merge.mesh;
     stats.triangles_in = merged.expanded_triangle_count();
     // Stage 5, simplify with IAS to the budget.
@@ -256,11 +257,26 @@ fn generate_optimized(
         let n = merged.submeshes.len();
         (merged, (0..n).map(Some).collect())
     };
+    // A version names its material as its source model does, the way a parent reads it back
+    // from the parts file: the merged index means nothing outside this aggregate.
     let handoff = Handoff::Versions(
         part_of_submesh
             .iter()
             .zip(&kept_parts)
-            .filter_map(|(key, k)| k.map(|k| (*key, Arc::new(simplified.submeshes[k].clone()))))
+            .filter_map(|(key, k)| {
+                let sub = &simplified.submeshes[(*k)?];
+                let material = sub
+                    .material
+                    .and_then(|m| material_keys.get(m))
+                    .map(|&(_, m)| m);
+                Some((
+                    *key,
+                    Arc::new(Submesh {
+                        material,
+                        ..sub.clone()
+                    }),
+                ))
+            })
             .collect(),
     );
     // Stage 6, atlas (section 7) and encode.

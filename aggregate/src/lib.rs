@@ -38,5 +38,7 @@ pub use store::{AggregateEntry, AggregateManifest, AggregateStore, Garbage};
 
 /// Version of the aggregate format written by this build; part of every key. 2: shared buffer
 /// views, shortest float text, co-placed parts merged, cheap placements baked, 16-bit
-/// instance rotations. 3: baked mirrored placements keep outward normals.
-pub const FORMAT: u32 = 3;
+/// instance rotations. 3: baked mirrored placements keep outward normals. 4: an aggregate
+/// built in the same run as its children keeps their parts' materials (before, a part handed
+/// over in memory could lose its texture or take another part's).
+pub const FORMAT: u32 = 4;
