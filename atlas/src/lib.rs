@@ -74,7 +74,7 @@ use horizon_mesh::model::{
     AlphaMode, InstancedMesh, InvalidMesh, Material, Submesh, Texture, TextureRef, Wrap,
 };
 
-pub use pack::{pack_rects, Layout, LayoutError, PackedRect};
+pub use pack::{pack_rects, Layout, LayoutError, PackedRect, MAXRECTS_MAX_CHARTS};
 
 /// Most source widths (or heights) of texels a chart keeps along one axis; a chart tiling more
 /// often than this is sampled at a lower density instead of filling the atlas with repeats.

@@ -1,6 +1,10 @@
-//! Stage 2: scale and pack. The placement is the `crunch` crate's (a maximal-rectangles packer
-//! for sprite atlases, largest items first, best-area fit; see Jylänki, "A thousand ways to pack
-//! the bin"); this file only chooses the global texel scale and checks what the packer returned.
+//! Stage 2: scale and pack. The placement is a crate's; this file only chooses the global texel
+//! scale and checks what the packer returned (see Jylänki, "A thousand ways to pack the bin"):
+//! - up to [`MAXRECTS_MAX_CHARTS`] charts, `crunch` (maximal rectangles, largest items first,
+//!   best-area fit), the tightest of the two;
+//! - beyond, `guillotiere` (a guillotine allocator, items offered largest area first).
+//!   Maximal rectangles costs O(n^2) per packing and a layout takes a dozen packings: on the
+//!   upper aggregates of a city (thousands of charts) it was most of the whole rebuild.
 
 use glam::DVec2;
 
@@ -9,6 +13,13 @@ use crate::AtlasError;
 
 /// Largest atlas side the packer is asked for: the common GPU texture limit.
 const PACKER_MAX_SIDE: u32 = 16384;
+
+/// Most charts packed by maximal rectangles. Measured on 512 x 512 with random chart sizes
+/// (the texel scale that packs, bisected, and the time of one packing): at 200 charts maximal
+/// rectangles fills 90% of the square against the guillotine's 87%, in 1.9 ms against under
+/// 0.1; at 1,000, 91% against 93% in 49 ms against 0.7; at 3,000, 92% against 98% in 476 ms
+/// against 1.4.
+pub const MAXRECTS_MAX_CHARTS: usize = 200;
 
 /// Factor by which the texel scale shrinks after a failed packing: ten percent per try keeps the
 /// found scale within ten percent of the largest that packs, in a few dozen tries at most.
@@ -113,25 +124,29 @@ impl Layout {
 /// returned layout is cropped to the packed extent.
 pub fn pack_rects(sizes: &[(u32, u32)], gutter: u32, max_side: u32) -> Option<Layout> {
     let side = max_side.min(PACKER_MAX_SIDE);
-    let mut items = Vec::with_capacity(sizes.len());
-    for (i, &(w, h)) in sizes.iter().enumerate() {
+    // Padded sizes; no rotation: a rotated chart would need its UVs rotated too, for little gain.
+    let mut padded = Vec::with_capacity(sizes.len());
+    for &(w, h) in sizes {
         if w == 0 || h == 0 {
             return None;
         }
-        let pw = usize::try_from(u64::from(w) + 2 * u64::from(gutter)).ok()?;
-        let ph = usize::try_from(u64::from(h) + 2 * u64::from(gutter)).ok()?;
-        // No rotation: a rotated chart would need its UVs rotated too, for little gain.
-        items.push(crunch::Item::new(i, pw, ph, crunch::Rotation::None));
+        let pw = u32::try_from(u64::from(w) + 2 * u64::from(gutter)).ok()?;
+        let ph = u32::try_from(u64::from(h) + 2 * u64::from(gutter)).ok()?;
+        if pw > side || ph > side {
+            return None;
+        }
+        padded.push((pw, ph));
     }
-    let square = crunch::Rect::of_size(side as usize, side as usize);
-    let packed = crunch::pack(square, items).ok()?;
+    let corners = if sizes.len() <= MAXRECTS_MAX_CHARTS {
+        pack_maximal_rectangles(&padded, side)?
+    } else {
+        pack_guillotine(&padded, side)?
+    };
     let mut rects = vec![PackedRect::default(); sizes.len()];
     let (mut width, mut height) = (0u32, 0u32);
-    for item in packed {
-        let r = item.rect;
-        let (x0, y0) = (u32::try_from(r.x).ok()?, u32::try_from(r.y).ok()?);
-        let (w, h) = *sizes.get(item.data)?;
-        rects[item.data] = PackedRect {
+    for (i, (x0, y0)) in corners.into_iter().enumerate() {
+        let (w, h) = sizes[i];
+        rects[i] = PackedRect {
             x: x0 + gutter,
             y: y0 + gutter,
             width: w,
@@ -146,6 +161,44 @@ pub fn pack_rects(sizes: &[(u32, u32)], gutter: u32, max_side: u32) -> Option<La
         gutter,
         rects,
     })
+}
+
+/// The top-left corner of every padded rectangle in a `side x side` square, by `crunch`.
+fn pack_maximal_rectangles(padded: &[(u32, u32)], side: u32) -> Option<Vec<(u32, u32)>> {
+    let items = padded
+        .iter()
+        .enumerate()
+        .map(|(i, &(w, h))| crunch::Item::new(i, w as usize, h as usize, crunch::Rotation::None));
+    let square = crunch::Rect::of_size(side as usize, side as usize);
+    let packed = crunch::pack(square, items).ok()?;
+    let mut corners = vec![None; padded.len()];
+    for item in packed {
+        let r = item.rect;
+        *corners.get_mut(item.data)? = Some((u32::try_from(r.x).ok()?, u32::try_from(r.y).ok()?));
+    }
+    corners.into_iter().collect()
+}
+
+/// The same by `guillotiere`, offered largest area first (ties by index, so the layout is
+/// deterministic).
+fn pack_guillotine(padded: &[(u32, u32)], side: u32) -> Option<Vec<(u32, u32)>> {
+    let mut order: Vec<usize> = (0..padded.len()).collect();
+    order.sort_by_key(|&i| {
+        (
+            std::cmp::Reverse(u64::from(padded[i].0) * u64::from(padded[i].1)),
+            i,
+        )
+    });
+    let side = i32::try_from(side).ok()?;
+    let mut allocator = guillotiere::AtlasAllocator::new(guillotiere::size2(side, side));
+    let mut corners = vec![(0, 0); padded.len()];
+    for i in order {
+        let (w, h) = padded[i];
+        let size = guillotiere::size2(i32::try_from(w).ok()?, i32::try_from(h).ok()?);
+        let min = allocator.allocate(size)?.rectangle.min;
+        corners[i] = (u32::try_from(min.x).ok()?, u32::try_from(min.y).ok()?);
+    }
+    Some(corners)
 }
 
 /// Finds the largest global texel scale <= 1 at which every chart, `ceil(natural size x scale)`

@@ -35,6 +35,28 @@ proptest! {
         }
     }
 
+    /// The same promises past `MAXRECTS_MAX_CHARTS`, where the guillotine allocator packs.
+    #[test]
+    fn many_packed_rectangles_are_disjoint_and_inside(
+        sizes in prop::collection::vec((1u32..12, 1u32..12), 201..600),
+        gutter in 0u32..3,
+        side in 16u32..400,
+    ) {
+        prop_assert!(sizes.len() > horizon_atlas::MAXRECTS_MAX_CHARTS);
+        if let Some(layout) = pack_rects(&sizes, gutter, side) {
+            prop_assert_eq!(layout.validate(), Ok(()));
+            prop_assert!(layout.width <= side && layout.height <= side);
+            prop_assert_eq!(layout.rects.len(), sizes.len());
+            for (r, &(w, h)) in layout.rects.iter().zip(&sizes) {
+                prop_assert_eq!((r.width, r.height), (w, h));
+            }
+        } else {
+            let (area, longest) = padded_area_and_longest(&sizes, gutter);
+            let side = u64::from(side);
+            prop_assert!(area * 2 > side * side || longest * 2 > side);
+        }
+    }
+
     #[test]
     fn covered_texels_survive_at_scale_one(
         (w, h) in (1u32..9, 1u32..9),
