@@ -13,9 +13,10 @@ use std::sync::OnceLock;
 use glam::{DVec2, Vec4};
 use horizon_mesh::model::{AlphaMode, InstancedMesh, Wrap};
 use image::{Rgba, RgbaImage};
+use rayon::prelude::*;
 
 use crate::chart::Chart;
-use crate::pack::Layout;
+use crate::pack::{Layout, PackedRect};
 use crate::AtlasError;
 
 /// Most bilinear samples per atlas texel and axis when a chart shrinks: a box filter over up to
@@ -50,22 +51,26 @@ pub(crate) fn decode_sources(mesh: &InstancedMesh) -> Result<Vec<Option<Source>>
             used[t.texture] = true;
         }
     }
-    let mut out = Vec::with_capacity(mesh.textures.len());
-    for (texture, (tex, used)) in mesh.textures.iter().zip(used).enumerate() {
-        if !used {
-            out.push(None);
-            continue;
-        }
-        let image = tex
-            .decode()
-            .map_err(|source| AtlasError::Decode { texture, source })?;
-        let nonempty = image.width() > 0 && image.height() > 0;
-        out.push(nonempty.then_some(Source {
-            image,
-            wrap: [tex.wrap_u, tex.wrap_v],
-        }));
-    }
-    Ok(out)
+    // In parallel: an upper aggregate decodes thousands of textures, and the top of the tree
+    // has too few aggregates to keep the cores busy by itself.
+    mesh.textures
+        .par_iter()
+        .zip(used)
+        .enumerate()
+        .map(|(texture, (tex, used))| {
+            if !used {
+                return Ok(None);
+            }
+            let image = tex
+                .decode()
+                .map_err(|source| AtlasError::Decode { texture, source })?;
+            let nonempty = image.width() > 0 && image.height() > 0;
+            Ok(nonempty.then_some(Source {
+                image,
+                wrap: [tex.wrap_u, tex.wrap_v],
+            }))
+        })
+        .collect()
 }
 
 /// Bakes every chart into an atlas of the layout's size. Texels outside every padded rectangle
@@ -76,39 +81,21 @@ pub(crate) fn bake_atlas(
     sources: &[Option<Source>],
     opaque: bool,
 ) -> RgbaImage {
+    // Interiors in parallel (each chart into its own buffer: the rectangles are disjoint), then
+    // copied in, then the gutters, which read the interiors.
+    let interiors: Vec<Vec<Rgba<u8>>> = charts
+        .par_iter()
+        .zip(&layout.rects)
+        .map(|(chart, rect)| bake_interior(chart, rect, sources, opaque))
+        .collect();
     let mut atlas = RgbaImage::new(layout.width, layout.height);
-    for (chart, rect) in charts.iter().zip(&layout.rects) {
-        let source = chart.texture.and_then(|t| sources.get(t)?.as_ref());
-        let step =
-            (chart.max - chart.min) / DVec2::new(f64::from(rect.width), f64::from(rect.height));
-        let samples = step.ceil().clamp(DVec2::ONE, DVec2::splat(MAX_SUPERSAMPLE));
-        let (kx, ky) = (samples.x as u32, samples.y as u32);
-        let weight = 1.0 / (kx * ky) as f32;
-        // Interior: resample, multiply, resolve alpha, encode.
-        for j in 0..rect.height {
-            for i in 0..rect.width {
-                let mut colour = Vec4::ZERO;
-                match source {
-                    Some(src) => {
-                        for b in 0..ky {
-                            for a in 0..kx {
-                                let sub = DVec2::new(
-                                    f64::from(i) + (f64::from(a) + 0.5) / f64::from(kx),
-                                    f64::from(j) + (f64::from(b) + 0.5) / f64::from(ky),
-                                );
-                                colour += sample_bilinear(src, chart.min + sub * step);
-                            }
-                        }
-                        if kx * ky > 1 {
-                            colour *= weight;
-                        }
-                    }
-                    None => colour = Vec4::ONE,
-                }
-                let px = encode_texel(colour * chart.factor, chart.alpha, opaque);
-                atlas.put_pixel(rect.x + i, rect.y + j, px);
-            }
+    for (rect, texels) in layout.rects.iter().zip(&interiors) {
+        for (k, px) in texels.iter().enumerate() {
+            let (i, j) = (k as u32 % rect.width, k as u32 / rect.width);
+            atlas.put_pixel(rect.x + i, rect.y + j, *px);
         }
+    }
+    for rect in &layout.rects {
         // Gutter: each texel repeats the nearest interior texel.
         let (x0, y0, x1, y1) = layout.padded(rect);
         for y in y0..y1 {
@@ -125,6 +112,45 @@ pub(crate) fn bake_atlas(
         }
     }
     atlas
+}
+
+/// One chart's rectangle, row by row: resampled, multiplied, alpha resolved, encoded.
+fn bake_interior(
+    chart: &Chart,
+    rect: &PackedRect,
+    sources: &[Option<Source>],
+    opaque: bool,
+) -> Vec<Rgba<u8>> {
+    let source = chart.texture.and_then(|t| sources.get(t)?.as_ref());
+    let step = (chart.max - chart.min) / DVec2::new(f64::from(rect.width), f64::from(rect.height));
+    let samples = step.ceil().clamp(DVec2::ONE, DVec2::splat(MAX_SUPERSAMPLE));
+    let (kx, ky) = (samples.x as u32, samples.y as u32);
+    let weight = 1.0 / (kx * ky) as f32;
+    let mut out = Vec::with_capacity(rect.width as usize * rect.height as usize);
+    for j in 0..rect.height {
+        for i in 0..rect.width {
+            let mut colour = Vec4::ZERO;
+            match source {
+                Some(src) => {
+                    for b in 0..ky {
+                        for a in 0..kx {
+                            let sub = DVec2::new(
+                                f64::from(i) + (f64::from(a) + 0.5) / f64::from(kx),
+                                f64::from(j) + (f64::from(b) + 0.5) / f64::from(ky),
+                            );
+                            colour += sample_bilinear(src, chart.min + sub * step);
+                        }
+                    }
+                    if kx * ky > 1 {
+                        colour *= weight;
+                    }
+                }
+                None => colour = Vec4::ONE,
+            }
+            out.push(encode_texel(colour * chart.factor, chart.alpha, opaque));
+        }
+    }
+    out
 }
 
 /// Linear RGBA to an sRGB texel, after the material's alpha mode: a mask becomes 0 or 1 against
