@@ -536,13 +536,6 @@ pub fn bench(dir: &Path, insert: usize, seed: u64, out: Option<&Path>) -> anyhow
     let after = store
         .manifest()?
         .context("incremental build wrote no manifest")?;
-    if let Ok(keep) = std::env::var("HORIZON_KEEP_JOURNAL") {
-        std::fs::copy(store.journal_path(), &keep)?;
-        std::fs::copy(
-            store.root().join("manifest.json"),
-            format!("{keep}.manifest"),
-        )?;
-    }
     let before_keys: BTreeSet<&String> = full_manifest.nodes.values().map(|e| &e.key).collect();
     let rebuilt: BTreeSet<u32> = after
         .nodes
