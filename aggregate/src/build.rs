@@ -150,22 +150,25 @@ pub fn build_aggregates(
             .map(|level| level.into_iter().filter(|n| set.contains(&n.0)).collect())
             .collect(),
     };
+    let total_nodes: usize = levels.iter().map(Vec::len).sum();
     // Stage 2: what the store already has.
     let mut known = store.known()?;
     if options.aggregate.method == Method::Unoptimized {
         // Baseline handoffs are not persisted: reuse all of a matching build or nothing.
+        // A build with failed nodes lacks them in its manifest, and their parents lack their
+        // geometry: nothing of it is reused.
         let complete = store
             .manifest()
             .ok()
             .flatten()
-            .is_some_and(|m| m.root_key == root_key);
+            .is_some_and(|m| m.root_key == root_key && m.nodes.len() == total_nodes);
         if !complete {
             known.clear();
         }
     }
     // Stage 3: bottom-up, one level at a time, nodes of a level in parallel.
     let table = Table1::calibrated();
-    let total: usize = levels.iter().map(Vec::len).sum();
+    let total = total_nodes;
     let done = AtomicUsize::new(0);
     let built_count = AtomicUsize::new(0);
     let mut entries: BTreeMap<u32, AggregateEntry> = BTreeMap::new();
@@ -349,7 +352,12 @@ pub fn node_keys(
     options: &AggregateOptions,
     atlas: bool,
 ) -> Result<HashMap<NodeId, String>, AggregateError> {
-    let fingerprint = format!("{}|atlas={atlas}", options.fingerprint());
+    // Table 1's thresholds decide every dedup: a recalibrated table changes every key.
+    let fingerprint = format!(
+        "{}|atlas={atlas}|table1={:?}",
+        options.fingerprint(),
+        Table1::calibrated().rows
+    );
     let mut keys: HashMap<NodeId, String> = HashMap::new();
     for level in levels.iter().rev() {
         let computed: Vec<(NodeId, String)> = level

@@ -187,17 +187,13 @@ fn generate_optimized(
     // model-internal instance.
     let mut merge = Merger::default();
     let mut part_of_submesh: Vec<PartKey> = Vec::new();
-    let mut slot: HashMap<PartKey, Option<usize>> = HashMap::new();
+    let mut slot: HashMap<PartKey, usize> = HashMap::new();
     for p in &kept {
         let (model, align) = match replacements.get(&p.model) {
             Some(r) => (r.by, r.align),
             None => (p.model, Affine3A::IDENTITY),
         };
         let source = &sources[&model];
-        let has_versions = versions
-            .range((model, 0)..=(model, u32::MAX))
-            .next()
-            .is_some();
         for (s, inner) in source.placements.iter().enumerate() {
             let key = (model, s as u32);
             let (centre, radius) = source.part_spheres[s];
@@ -217,18 +213,17 @@ fn generate_optimized(
                     stats.culled_parts += 1;
                     continue;
                 }
+                // The children's coarsest version, else the source part: a part can have no
+                // version although its model has some, when every child that drew the model
+                // culled the part, drew the model as a look-alike, or failed, while here it
+                // is big enough to show.
                 let index = *slot.entry(key).or_insert_with(|| {
-                    let sub: Option<Submesh> = if input.children.is_empty() || !has_versions {
-                        Some(source.mesh.submeshes[s].clone())
-                    } else {
-                        versions.get(&key).map(|v| (**v).clone())
-                    };
-                    sub.map(|sub| {
-                        part_of_submesh.push(key);
-                        merge.submesh(model, source, sub)
-                    })
+                    let sub = versions
+                        .get(&key)
+                        .map_or_else(|| source.mesh.submeshes[s].clone(), |v| (**v).clone());
+                    part_of_submesh.push(key);
+                    merge.submesh(model, source, sub)
                 });
-                let Some(index) = index else { continue };
                 merge.mesh.instances.push(Instance {
                     submesh: index,
                     transform,

@@ -40,5 +40,7 @@ pub use store::{AggregateEntry, AggregateManifest, AggregateStore, Garbage};
 /// views, shortest float text, co-placed parts merged, cheap placements baked, 16-bit
 /// instance rotations. 3: baked mirrored placements keep outward normals. 4: an aggregate
 /// built in the same run as its children keeps their parts' materials (before, a part handed
-/// over in memory could lose its texture or take another part's).
-pub const FORMAT: u32 = 4;
+/// over in memory could lose its texture or take another part's). 5: a part without a version
+/// from the children comes from its source model instead of being left out, and Table 1 is
+/// part of every key.
+pub const FORMAT: u32 = 5;

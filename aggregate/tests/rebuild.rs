@@ -552,3 +552,100 @@ fn a_parent_built_over_reused_children_equals_one_built_with_them() {
     let _ = std::fs::remove_dir_all(&a);
     let _ = std::fs::remove_dir_all(&b);
 }
+
+/// A part that no child handed over although its model's other parts came through (every
+/// child that drew the model culled it, or drew the model as a look-alike, or failed) comes
+/// from the source model when it is big enough to show here; it used to be left out.
+#[test]
+fn a_part_missing_from_the_children_comes_from_its_source_model() {
+    use horizon_aggregate::budget::Display;
+    use horizon_aggregate::{generate, Handoff, NodeInput, Placement};
+    use horizon_descriptors::calibrate::Table1;
+    use std::collections::BTreeMap;
+    use std::sync::Arc;
+
+    // One model of two parts: a box (12 triangles) and a spike (6).
+    let (boxed, spike) = (textured_box(), spike());
+    let mut mesh = boxed.clone();
+    let mut tip = spike.submeshes[0].clone();
+    tip.material = Some(1);
+    mesh.submeshes.push(tip);
+    mesh.materials.push(spike.materials[0].clone());
+    mesh.instances.push(horizon_mesh::Instance {
+        submesh: 1,
+        transform: Affine3A::from_translation(Vec3::new(0.0, 0.5, 0.0)),
+    });
+    mesh.validate().expect("valid model");
+    let d = describe(&mesh, &DescriptorOptions::default())
+        .expect("describe")
+        .descriptors;
+    let models = InMemoryModels::new(vec![SourceModel::new(
+        "two-part".into(),
+        mesh.clone(),
+        d.zernike,
+        d.csd,
+    )]);
+    // Two placements close enough that both parts cover many pixels.
+    let placements: Vec<Placement> = [0.0f32, 3.0]
+        .iter()
+        .map(|&x| Placement {
+            model: 0,
+            transform: Affine3A::from_translation(Vec3::new(x, 0.0, 0.0)),
+            centre: Vec3::new(x, 1.0, 0.0),
+            radius: 2.0,
+        })
+        .collect();
+    let options = AggregateOptions {
+        dedup: false,
+        ..AggregateOptions::default()
+    };
+    // A child handed over the box part alone.
+    let mut versions = BTreeMap::new();
+    versions.insert((0u64, 0u32), Arc::new(mesh.submeshes[0].clone()));
+    let input = NodeInput {
+        node: 1,
+        display: Display::of(Vec3::new(1.5, 1.0, 0.0), 3.5, 2.0, &options),
+        outer_radius: 5.5,
+        placements,
+        children: vec![Arc::new(Handoff::Versions(versions))],
+        atlas: false,
+    };
+    let out = generate(&input, &models, &Table1::calibrated(), &options).expect("generate");
+    assert_eq!(
+        out.stats.culled + out.stats.culled_parts,
+        0,
+        "{:?}",
+        out.stats
+    );
+    // Both parts of both placements: 2 x (12 + 6) triangles.
+    assert_eq!(out.stats.triangles_in, 36, "{:?}", out.stats);
+}
+
+/// The baseline reuses a whole earlier build or nothing: a manifest that lacks a node (the
+/// mark a failed aggregate leaves) means its parents were built without that subtree's
+/// geometry, so none of it is reused.
+#[test]
+fn the_baseline_rebuilds_everything_after_a_build_that_lacks_a_node() {
+    let w = world();
+    let bvh = tree(&w);
+    let mut opts = options(&w);
+    opts.aggregate = opts.aggregate.unoptimized();
+    let dir = temp("base-failed");
+    let store = AggregateStore::new(&dir);
+    build_aggregates(&bvh, &w.models, &store, &opts, &|_| {}).expect("first build");
+    let again = build_aggregates(&bvh, &w.models, &store, &opts, &|_| {}).expect("again");
+    assert_eq!(again.reused, bvh.node_count(), "a whole build is reused");
+    // Drop one leaf from the manifest, as a failed build leaves it.
+    let mut m = store.manifest().expect("read").expect("manifest");
+    let leaf = *m
+        .nodes
+        .keys()
+        .find(|&&n| bvh.node(NodeId(n)).expect("node").is_leaf())
+        .expect("a leaf");
+    m.nodes.remove(&leaf);
+    store.write_manifest(&m).expect("write");
+    let report = build_aggregates(&bvh, &w.models, &store, &opts, &|_| {}).expect("rebuild");
+    assert_eq!(report.reused, 0);
+    assert_eq!(report.built, bvh.node_count());
+    let _ = std::fs::remove_dir_all(&dir);
+}
