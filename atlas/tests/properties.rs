@@ -19,20 +19,7 @@ proptest! {
         gutter in 0u32..4,
         side in 1u32..300,
     ) {
-        if let Some(layout) = pack_rects(&sizes, gutter, side) {
-            prop_assert_eq!(layout.validate(), Ok(()));
-            prop_assert!(layout.width <= side && layout.height <= side);
-            prop_assert_eq!(layout.rects.len(), sizes.len());
-            for (r, &(w, h)) in layout.rects.iter().zip(&sizes) {
-                prop_assert_eq!((r.width, r.height), (w, h));
-            }
-        } else {
-            // Refusing is only fair when the square is tight: the packer is not optimal, but with
-            // at most half the area used and no rectangle over half the side it always fits.
-            let (area, longest) = padded_area_and_longest(&sizes, gutter);
-            let side = u64::from(side);
-            prop_assert!(area * 2 > side * side || longest * 2 > side);
-        }
+        packs_fairly(&sizes, gutter, side)?;
     }
 
     /// The same promises past `MAXRECTS_MAX_CHARTS`, where the guillotine allocator packs.
@@ -43,18 +30,7 @@ proptest! {
         side in 16u32..400,
     ) {
         prop_assert!(sizes.len() > horizon_atlas::MAXRECTS_MAX_CHARTS);
-        if let Some(layout) = pack_rects(&sizes, gutter, side) {
-            prop_assert_eq!(layout.validate(), Ok(()));
-            prop_assert!(layout.width <= side && layout.height <= side);
-            prop_assert_eq!(layout.rects.len(), sizes.len());
-            for (r, &(w, h)) in layout.rects.iter().zip(&sizes) {
-                prop_assert_eq!((r.width, r.height), (w, h));
-            }
-        } else {
-            let (area, longest) = padded_area_and_longest(&sizes, gutter);
-            let side = u64::from(side);
-            prop_assert!(area * 2 > side * side || longest * 2 > side);
-        }
+        packs_fairly(&sizes, gutter, side)?;
     }
 
     #[test]
@@ -109,6 +85,25 @@ proptest! {
 }
 
 /// Total area and longest side of the rectangles with their gutters.
+/// A packing is valid, inside the square and keeps every size; or it is refused, which is only
+/// fair when the square is tight: the packers are not optimal, but with at most half the area
+/// used and no rectangle over half the side they always fit.
+fn packs_fairly(sizes: &[(u32, u32)], gutter: u32, side: u32) -> Result<(), TestCaseError> {
+    if let Some(layout) = pack_rects(sizes, gutter, side) {
+        prop_assert_eq!(layout.validate(), Ok(()));
+        prop_assert!(layout.width <= side && layout.height <= side);
+        prop_assert_eq!(layout.rects.len(), sizes.len());
+        for (r, &(w, h)) in layout.rects.iter().zip(sizes) {
+            prop_assert_eq!((r.width, r.height), (w, h));
+        }
+    } else {
+        let (area, longest) = padded_area_and_longest(sizes, gutter);
+        let side = u64::from(side);
+        prop_assert!(area * 2 > side * side || longest * 2 > side);
+    }
+    Ok(())
+}
+
 fn padded_area_and_longest(sizes: &[(u32, u32)], gutter: u32) -> (u64, u64) {
     let g = 2 * u64::from(gutter);
     let padded = || {
