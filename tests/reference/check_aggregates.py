@@ -65,7 +65,11 @@ def main(horizon, validate_mjs, world):
             capture_output=True,
             text=True,
         )
-        for line in out.stdout.splitlines():
+        lines = out.stdout.splitlines()
+        # A validator that could not start prints nothing: that is a failure, not a pass.
+        batch = len(files[k : k + 200])
+        check(f"validator ran on files {k}..{k + batch}", len(lines) == batch, out.stderr.strip()[-300:])
+        for line in lines:
             r = json.loads(line)
             check(f"validator {pathlib.Path(r['file']).name}", r["errors"] == 0, r["messages"])
             errors += r["errors"]

@@ -90,6 +90,10 @@ def main(horizon, validate_mjs):
                                                capture_output=True, text=True, check=True).stdout)["triangles_unique"]
             check(f"trimesh loads {plain.name}", loaded == unique, f"{loaded} unique triangles, expected {unique}")
         validation = subprocess.run(["node", validate_mjs, *map(str, outputs)], capture_output=True, text=True)
+        # A validator that could not start exits 1 like one that found errors, but reports
+        # on no file: that is a failure, not a pass.
+        check("glTF-Validator reported on every file", len(validation.stdout.splitlines()) == len(outputs),
+              validation.stderr.strip()[-300:])
         for line in validation.stdout.splitlines():
             r = json.loads(line)
             check(f"glTF-Validator {pathlib.Path(r['file']).name}", r["errors"] == 0,
