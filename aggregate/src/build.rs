@@ -124,10 +124,11 @@ pub fn build_aggregates(
         .aggregate
         .validate()
         .map_err(|e| AggregateError::Tree(format!("bad options: {e}")))?;
-    // Stage 1: levels and keys.
+    // Stage 1: levels and keys (Table 1 is in every key and decides every dedup).
     let atlas = resolve_atlas(options);
+    let table = Table1::calibrated();
     let levels = levels(bvh);
-    let keys = node_keys(bvh, models, &levels, &options.aggregate, atlas)?;
+    let keys = node_keys(bvh, models, &levels, &options.aggregate, atlas, &table)?;
     let only = options.only.as_ref().map(|roots| closed_below(bvh, roots));
     let root_key = match &only {
         None => keys.get(&bvh.root()).cloned().unwrap_or_default(),
@@ -150,7 +151,7 @@ pub fn build_aggregates(
             .map(|level| level.into_iter().filter(|n| set.contains(&n.0)).collect())
             .collect(),
     };
-    let total_nodes: usize = levels.iter().map(Vec::len).sum();
+    let total: usize = levels.iter().map(Vec::len).sum();
     // Stage 2: what the store already has.
     let mut known = store.known()?;
     if options.aggregate.method == Method::Unoptimized {
@@ -161,14 +162,12 @@ pub fn build_aggregates(
             .manifest()
             .ok()
             .flatten()
-            .is_some_and(|m| m.root_key == root_key && m.nodes.len() == total_nodes);
+            .is_some_and(|m| m.root_key == root_key && m.nodes.len() == total);
         if !complete {
             known.clear();
         }
     }
     // Stage 3: bottom-up, one level at a time, nodes of a level in parallel.
-    let table = Table1::calibrated();
-    let total = total_nodes;
     let done = AtomicUsize::new(0);
     let built_count = AtomicUsize::new(0);
     let mut entries: BTreeMap<u32, AggregateEntry> = BTreeMap::new();
@@ -351,12 +350,13 @@ pub fn node_keys(
     levels: &[Vec<NodeId>],
     options: &AggregateOptions,
     atlas: bool,
+    table: &Table1,
 ) -> Result<HashMap<NodeId, String>, AggregateError> {
     // Table 1's thresholds decide every dedup: a recalibrated table changes every key.
     let fingerprint = format!(
         "{}|atlas={atlas}|table1={:?}",
         options.fingerprint(),
-        Table1::calibrated().rows
+        table.rows
     );
     let mut keys: HashMap<NodeId, String> = HashMap::new();
     for level in levels.iter().rev() {

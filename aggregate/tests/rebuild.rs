@@ -176,12 +176,16 @@ fn new_object<'a>(w: &'a World, model: u64, t: Affine3A) -> NewObject<'a> {
 }
 
 fn tree(w: &World) -> Bvh {
+    tree_with(w, BvhOptions::with_branching(4))
+}
+
+fn tree_with(w: &World, options: BvhOptions) -> Bvh {
     let objects: Vec<NewObject> = w
         .objects
         .iter()
         .map(|&(m, t)| new_object(w, m, t))
         .collect();
-    let bvh = Bvh::bulk_build(BvhOptions::with_branching(4), &objects).expect("bulk build");
+    let bvh = Bvh::bulk_build(options, &objects).expect("bulk build");
     bvh.validate().expect("valid tree");
     bvh
 }
@@ -519,16 +523,13 @@ fn a_partial_build_builds_the_named_subtrees_only() {
 fn a_parent_built_over_reused_children_equals_one_built_with_them() {
     let w = world();
     // A spatial tree (mu 0), so that leaves mix boxes and spikes.
-    let objects: Vec<NewObject> = w
-        .objects
-        .iter()
-        .map(|&(m, t)| new_object(&w, m, t))
-        .collect();
-    let spatial = BvhOptions {
-        mu: 0.0,
-        ..BvhOptions::with_branching(4)
-    };
-    let bvh = Bvh::bulk_build(spatial, &objects).expect("bulk build");
+    let bvh = tree_with(
+        &w,
+        BvhOptions {
+            mu: 0.0,
+            ..BvhOptions::with_branching(4)
+        },
+    );
     let (a, b) = (temp("handoff-a"), temp("handoff-b"));
     let (sa, sb) = (AggregateStore::new(&a), AggregateStore::new(&b));
     build_aggregates(&bvh, &w.models, &sa, &options(&w), &|_| {}).expect("whole build");

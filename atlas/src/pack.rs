@@ -142,16 +142,15 @@ pub fn pack_rects(sizes: &[(u32, u32)], gutter: u32, max_side: u32) -> Option<La
     } else {
         pack_guillotine(&padded, side)?
     };
-    let mut rects = vec![PackedRect::default(); sizes.len()];
+    let mut rects = Vec::with_capacity(sizes.len());
     let (mut width, mut height) = (0u32, 0u32);
-    for (i, (x0, y0)) in corners.into_iter().enumerate() {
-        let (w, h) = sizes[i];
-        rects[i] = PackedRect {
+    for ((x0, y0), &(w, h)) in corners.into_iter().zip(sizes) {
+        rects.push(PackedRect {
             x: x0 + gutter,
             y: y0 + gutter,
             width: w,
             height: h,
-        };
+        });
         width = width.max(x0 + w + 2 * gutter);
         height = height.max(y0 + h + 2 * gutter);
     }

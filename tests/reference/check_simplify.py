@@ -20,7 +20,6 @@ bench/table3.py.
 Usage: check_simplify.py HORIZON_BINARY VALIDATE_MJS
 Prints one line per check and a closing 'N passed, M failed' line; exits 1 on any failure."""
 import json
-import os
 import pathlib
 import subprocess
 import sys
@@ -207,33 +206,6 @@ def write_ply(path, v, f):
         out.write(faces.tobytes())
 
 
-def validator_dir():
-    """GLTF_VALIDATOR_DIR if set, else the tools tests/run.sh installs, else ~/.cache/reftools."""
-    if os.environ.get("GLTF_VALIDATOR_DIR"):
-        return os.environ["GLTF_VALIDATOR_DIR"]
-    tools = pathlib.Path(os.environ.get("HORIZON_TOOLS", pathlib.Path.home() / ".cache" / "horizon-tools"))
-    for d in (tools / "npm", pathlib.Path.home() / ".cache" / "reftools" / "npm"):
-        if (d / "node_modules" / "gltf-validator").is_dir():
-            return str(d)
-    return str(tools / "npm")
-
-
-def validate(validate_mjs, files):
-    """Runs the Khronos glTF-Validator; returns {file: {errors, warnings, messages}} (a file
-    the validator did not report on is missing)."""
-    if not files:
-        return {}
-    run = subprocess.run(["node", str(validate_mjs), *map(str, files)], capture_output=True, text=True,
-                         env={**os.environ, "GLTF_VALIDATOR_DIR": validator_dir()})
-    out = {}
-    for line in run.stdout.splitlines():
-        r = json.loads(line)
-        out[r["file"]] = r
-    if run.returncode not in (0, 1) or not out:
-        raise RuntimeError(f"glTF-Validator failed ({run.returncode}): {run.stderr.strip()[:500]}")
-    return out
-
-
 def has_command(horizon, *words):
     """Whether the binary has the subcommand `words` (its --help exits 0)."""
     run = subprocess.run([str(horizon), *words, "--help"], capture_output=True, text=True)
@@ -336,15 +308,7 @@ def main(horizon, validate_mjs):
                           abs(h - a) <= 0.25 * a + 1e-6,
                           f"horizon {h:.4g}, pymeshlab {a:.4g} relative to the diagonal")
 
-        try:
-            reports = validate(validate_mjs, outputs)
-            for out in outputs:
-                r = reports.get(str(out))
-                check(f"glTF-Validator {out.name}", r is not None and r["errors"] == 0,
-                      "no report" if r is None else
-                      f"{r['errors']} errors, {r['warnings']} warnings {r['messages'][:3]}")
-        except RuntimeError as e:
-            check("glTF-Validator ran", False, str(e))
+        ref.check_valid(check, validate_mjs, outputs)
     passed = sum(results)
     print(f"{passed} passed, {len(results) - passed} failed ({time.perf_counter() - started:.0f} s)")
     return 0 if all(results) and results else 1

@@ -7,7 +7,9 @@ compressed files."""
 import base64
 import json
 import os
+import pathlib
 import struct
+import subprocess
 import urllib.parse
 
 import numpy as np
@@ -152,3 +154,50 @@ def placed_primitives(asset):
                 out.append((triangles(doc, p), tuple(world.flatten())))
     out.sort()
     return out
+
+
+def validator_dir():
+    """GLTF_VALIDATOR_DIR if set, else the tools tests/run.sh installs, else ~/.cache/reftools."""
+    if os.environ.get("GLTF_VALIDATOR_DIR"):
+        return os.environ["GLTF_VALIDATOR_DIR"]
+    tools = pathlib.Path(os.environ.get("HORIZON_TOOLS", pathlib.Path.home() / ".cache" / "horizon-tools"))
+    for d in (tools / "npm", pathlib.Path.home() / ".cache" / "reftools" / "npm"):
+        if (d / "node_modules" / "gltf-validator").is_dir():
+            return str(d)
+    return str(tools / "npm")
+
+
+def validate(validate_mjs, files, batch=200):
+    """Runs the Khronos glTF-Validator (`validate_mjs`, in batches of `batch` files); returns
+    {file: {errors, warnings, messages}}, keyed by the path as given. A file the validator did
+    not report on is missing, so a caller checks every file it passed; a run that reported on
+    nothing raises RuntimeError."""
+    out = {}
+    files = [str(f) for f in files]
+    for k in range(0, len(files), batch):
+        run = subprocess.run(["node", str(validate_mjs), *files[k:k + batch]], capture_output=True, text=True,
+                             env={**os.environ, "GLTF_VALIDATOR_DIR": validator_dir()})
+        reported = [json.loads(line) for line in run.stdout.splitlines()]
+        if run.returncode not in (0, 1) or not reported:
+            raise RuntimeError(f"glTF-Validator failed ({run.returncode}): {run.stderr.strip()[-500:]}")
+        out.update((r["file"], r) for r in reported)
+    return out
+
+
+def check_valid(check, validate_mjs, files):
+    """One check per file, through `check(name, ok, detail)`: the validator reported on it with
+    0 errors (a file without a report fails, and so does a validator that cannot run). Returns
+    the errors reported in all."""
+    files = list(files)
+    try:
+        reports = validate(validate_mjs, files)
+    except RuntimeError as e:
+        check("glTF-Validator ran", False, str(e))
+        return 0
+    errors = 0
+    for f in files:
+        r = reports.get(str(f))
+        check(f"glTF-Validator {pathlib.Path(f).name}", r is not None and r["errors"] == 0,
+              "no report" if r is None else f"{r['errors']} errors, {r['warnings']} warnings {r['messages'][:3]}")
+        errors += 0 if r is None else r["errors"]
+    return errors
