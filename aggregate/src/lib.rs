@@ -42,5 +42,6 @@ pub use store::{AggregateEntry, AggregateManifest, AggregateStore, Garbage};
 /// built in the same run as its children keeps their parts' materials (before, a part handed
 /// over in memory could lose its texture or take another part's). 5: a part without a version
 /// from the children comes from its source model instead of being left out, and Table 1 is
-/// part of every key.
-pub const FORMAT: u32 = 5;
+/// part of every key. 6: the simplifier sweeps separate pieces (the same collapses, but equal
+/// costs may now fall in another order).
+pub const FORMAT: u32 = 6;

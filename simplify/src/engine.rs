@@ -28,10 +28,12 @@ use crate::quadric::Quadric;
 use crate::radix_heap::RadixHeap;
 use crate::weights::{FlipGuard, InstanceSet};
 
+mod sweep;
+
 const DEAD: u32 = u32::MAX;
 
 /// Scratch memory reused between simplifications: every buffer keeps its capacity.
-#[derive(Debug, Default)]
+#[derive(Debug)]
 pub struct Workspace {
     // Position vertices: what a cost evaluation reads, together (two cache lines each).
     verts: Vec<Vert>,
@@ -55,6 +57,10 @@ pub struct Workspace {
     pairs: Vec<[u32; 2]>,
     // Per submesh.
     subs: Vec<SubInfo>,
+    /// How the first part of the order is swept (see [`sweep`]).
+    sweep: sweep::Settings,
+    /// What the last run's sweeps did.
+    swept: sweep::Outcome,
 }
 
 /// A position vertex: what planning a collapse reads, in two cache lines.
@@ -135,7 +141,7 @@ struct SubInfo {
 }
 
 /// A candidate collapse in the global queue, keyed by its cost's bits.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
 struct Candidate {
     p: u32,
     q: u32,
@@ -192,12 +198,47 @@ struct Plan {
     full: bool,
 }
 
+/// What became of one candidate taken off a queue.
+enum Step {
+    /// The plan or the checks refused it.
+    Rejected,
+    /// Its error is over the bound: the run ends.
+    OverBound,
+    /// It collapsed onto this vertex.
+    Collapsed(u32),
+}
+
 /// The outcome of a run of the collapse loop.
 #[derive(Debug, Default, Clone, Copy)]
 pub(crate) struct RunStats {
     pub expanded: u64,
     pub collapses: u64,
     pub error: f64,
+}
+
+impl Default for Workspace {
+    fn default() -> Self {
+        Self {
+            verts: Vec::new(),
+            stamp: Vec::new(),
+            vsub: Vec::new(),
+            wedge_pos: Vec::new(),
+            uv: Vec::new(),
+            normal: Vec::new(),
+            color: Vec::new(),
+            tris: Vec::new(),
+            adj: Vec::new(),
+            generation: 0,
+            heap: RadixHeap::default(),
+            tri_k: Vec::new(),
+            tri_r: Vec::new(),
+            ring: Vec::new(),
+            pairs: Vec::new(),
+            subs: Vec::new(),
+            sweep: sweep::Settings::default(),
+            swept: sweep::Outcome::None,
+        }
+    }
 }
 
 impl Workspace {
@@ -628,22 +669,29 @@ impl Workspace {
     }
 
     fn push(&mut self, p: u32, q: u32) {
-        if let Some(plan) = self.plan(p, q) {
-            let candidate = Candidate {
-                p,
-                q,
-                stamp_p: self.stamp[p as usize],
-                stamp_q: self.stamp[q as usize],
-            };
-            // The queue orders collapses by cost per instance: a collapse in a submesh drawn n
-            // times removes n times the triangles for its summed cost, so this is the error
-            // paid per expanded triangle removed. Ordering by the raw summed cost (the paper's
-            // section 6.2, step 3) would spend every cheap edge of the once-drawn submeshes
-            // first, over-simplifying a tree's trunk to spare its thousands of leaves.
-            let instances = self.subs[self.vsub[p as usize] as usize].instances.max(1);
-            let priority = plan.cost / instances as f64;
-            self.heap.push(priority.to_bits(), candidate);
+        if let Some((key, candidate)) = self.candidate(p, q) {
+            self.heap.push(key, candidate);
         }
+    }
+
+    /// The queue entry of edge `p q`: its key and the endpoints' stamps, or `None` when the
+    /// edge may not collapse.
+    fn candidate(&self, p: u32, q: u32) -> Option<(u64, Candidate)> {
+        let plan = self.plan(p, q)?;
+        let candidate = Candidate {
+            p,
+            q,
+            stamp_p: self.stamp[p as usize],
+            stamp_q: self.stamp[q as usize],
+        };
+        // The queue orders collapses by cost per instance: a collapse in a submesh drawn n
+        // times removes n times the triangles for its summed cost, so this is the error
+        // paid per expanded triangle removed. Ordering by the raw summed cost (the paper's
+        // section 6.2, step 3) would spend every cheap edge of the once-drawn submeshes
+        // first, over-simplifying a tree's trunk to spare its thousands of leaves.
+        let instances = self.subs[self.vsub[p as usize] as usize].instances.max(1);
+        let priority = plan.cost / instances as f64;
+        Some((priority.to_bits(), candidate))
     }
 
     /// Every current edge once, into the heap.
@@ -685,19 +733,65 @@ impl Workspace {
 
     /// Stage 3: collapses in one global order of cost until the expanded count reaches
     /// `target`, the error bound is hit, or nothing more can collapse.
+    ///
+    /// Where the mesh falls into many separate pieces, the first and largest part of the work
+    /// runs piece by piece in sweeps of rising cost (see [`sweep`]), which keeps each piece in
+    /// cache; the sweeps end in exactly the state of the single queue, which takes over for the
+    /// rest. `None` means a sweep went past the target: the caller loads the mesh again and
+    /// runs [`Self::run_strict`].
     pub(crate) fn run(
         &mut self,
         expanded: u64,
         target: u64,
         options: &SimplifyOptions,
-    ) -> RunStats {
+    ) -> Option<RunStats> {
         let mut stats = RunStats {
             expanded,
             ..RunStats::default()
         };
+        self.swept = sweep::Outcome::None;
+        let queued = if options.max_error.is_none() && self.sweep.share > 0.0 {
+            let queued = self.sweep(&mut stats, target);
+            self.swept = match queued {
+                None => sweep::Outcome::ReachedTarget,
+                Some(true) => sweep::Outcome::Swept,
+                Some(false) => sweep::Outcome::None,
+            };
+            queued?
+        } else {
+            false
+        };
+        Some(self.run_queue(stats, target, options, queued))
+    }
+
+    /// Stage 3 in one queue from the start: [`Self::run`] without the sweeps.
+    pub(crate) fn run_strict(
+        &mut self,
+        expanded: u64,
+        target: u64,
+        options: &SimplifyOptions,
+    ) -> RunStats {
+        let stats = RunStats {
+            expanded,
+            ..RunStats::default()
+        };
+        self.run_queue(stats, target, options, false)
+    }
+
+    /// The collapse loop over the global queue; `queued` when the queue already holds the
+    /// first round's candidates (left by the sweeps), otherwise every round seeds it afresh.
+    fn run_queue(
+        &mut self,
+        mut stats: RunStats,
+        target: u64,
+        options: &SimplifyOptions,
+        mut queued: bool,
+    ) -> RunStats {
         let max_cost_error = options.max_error.unwrap_or(f64::INFINITY);
         'rounds: while stats.expanded > target {
-            self.seed_heap();
+            if !std::mem::take(&mut queued) {
+                self.seed_heap();
+            }
             let before = stats.collapses;
             while stats.expanded > target {
                 // Entries older than an endpoint's last change are stale: dropped unseen.
@@ -707,42 +801,16 @@ impl Workspace {
                 }) else {
                     break;
                 };
-                let Some(plan) = self.plan(c.p, c.q) else {
-                    continue;
-                };
-                let keep = plan.keep as usize;
-                let weight = self.verts[keep].quadric.weight()
-                    + self.verts[plan.remove as usize].quadric.weight();
-                let error = if weight > 0.0 {
-                    (plan.cost / weight).sqrt()
-                } else {
-                    plan.cost.sqrt()
-                };
-                if error > max_cost_error {
-                    break 'rounds;
-                }
-                if let Some(removed) = self.try_collapse(&plan) {
-                    let sub = &self.subs[self.vsub[keep] as usize];
-                    stats.expanded -= removed * sub.instances;
-                    stats.collapses += 1;
-                    stats.error = stats.error.max(error);
-                    self.collect_ring(plan.keep);
-                    let ring = std::mem::take(&mut self.ring);
-                    // Touch every neighbour's quadric and stamp first: the loads miss the
-                    // cache independently and overlap, where the costs below would wait for
-                    // them one neighbour at a time.
-                    let touched: f64 = ring
-                        .iter()
-                        .map(|&u| {
-                            let v = &self.verts[u as usize];
-                            v.quadric.touch() + f64::from(self.stamp[u as usize])
-                        })
-                        .sum();
-                    std::hint::black_box(touched);
-                    for &u in &ring {
-                        self.push(plan.keep, u);
+                match self.step(c, &mut stats, max_cost_error) {
+                    Step::Rejected => {}
+                    Step::OverBound => break 'rounds,
+                    Step::Collapsed(keep) => {
+                        let ring = std::mem::take(&mut self.ring);
+                        for &u in &ring {
+                            self.push(keep, u);
+                        }
+                        self.ring = ring;
                     }
-                    self.ring = ring;
                 }
             }
             if stats.collapses == before {
@@ -750,6 +818,52 @@ impl Workspace {
             }
         }
         stats
+    }
+
+    /// Whether candidate `c` is current: neither endpoint changed since it was queued.
+    #[inline]
+    fn is_current(&self, c: &Candidate) -> bool {
+        self.stamp[c.p as usize] == c.stamp_p && self.stamp[c.q as usize] == c.stamp_q
+    }
+
+    /// One current candidate off a queue: plan it, check it, collapse it. After a collapse
+    /// `self.ring` holds the kept vertex's neighbours, whose edges the caller queues again.
+    fn step(&mut self, c: Candidate, stats: &mut RunStats, max_cost_error: f64) -> Step {
+        let Some(plan) = self.plan(c.p, c.q) else {
+            return Step::Rejected;
+        };
+        let keep = plan.keep as usize;
+        let weight =
+            self.verts[keep].quadric.weight() + self.verts[plan.remove as usize].quadric.weight();
+        let error = if weight > 0.0 {
+            (plan.cost / weight).sqrt()
+        } else {
+            plan.cost.sqrt()
+        };
+        if error > max_cost_error {
+            return Step::OverBound;
+        }
+        let Some(removed) = self.try_collapse(&plan) else {
+            return Step::Rejected;
+        };
+        let sub = &self.subs[self.vsub[keep] as usize];
+        stats.expanded -= removed * sub.instances;
+        stats.collapses += 1;
+        stats.error = stats.error.max(error);
+        self.collect_ring(plan.keep);
+        // Touch every neighbour's quadric and stamp first: the loads miss the cache
+        // independently and overlap, where the costs the caller computes next would wait for
+        // them one neighbour at a time.
+        let touched: f64 = self
+            .ring
+            .iter()
+            .map(|&u| {
+                let v = &self.verts[u as usize];
+                v.quadric.touch() + f64::from(self.stamp[u as usize])
+            })
+            .sum();
+        std::hint::black_box(touched);
+        Step::Collapsed(plan.keep)
     }
 
     /// Checks the collapse (link condition, no duplicate faces, seams, flips) and performs it.

@@ -113,7 +113,15 @@ fn run_engine(
     // position are dropped on load, so `loaded` may be below `triangles_in`.
     let loaded = workspace.load(mesh, &sets);
     workspace.build_quadrics(&sets, options);
-    let stats = workspace.run(loaded, triangles_target, options);
+    let stats = workspace
+        .run(loaded, triangles_target, options)
+        .unwrap_or_else(|| {
+            // A sweep reached the target inside the strict order's last stretch: again, in
+            // one queue.
+            workspace.load(mesh, &sets);
+            workspace.build_quadrics(&sets, options);
+            workspace.run_strict(loaded, triangles_target, options)
+        });
     let (out, kept) = workspace.assemble(mesh);
     let report = SimplifyReport {
         method: "ias",

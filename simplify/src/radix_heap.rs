@@ -74,7 +74,17 @@ impl<T: Copy> RadixHeap<T> {
     /// Rejected items are also dropped in bulk whenever a bucket is redistributed, where the
     /// checks of a whole bucket run back to back (their memory accesses overlap) instead of
     /// one per pop.
-    pub(crate) fn pop_valid(&mut self, mut valid: impl FnMut(&T) -> bool) -> Option<(u64, T)> {
+    pub(crate) fn pop_valid(&mut self, valid: impl FnMut(&T) -> bool) -> Option<(u64, T)> {
+        self.pop_valid_at_most(u64::MAX, valid)
+    }
+
+    /// [`Self::pop_valid`], but only an item whose key is at most `ceiling`: `None` when the
+    /// smallest valid key is above it (that item stays queued).
+    pub(crate) fn pop_valid_at_most(
+        &mut self,
+        ceiling: u64,
+        mut valid: impl FnMut(&T) -> bool,
+    ) -> Option<(u64, T)> {
         loop {
             if self.len == 0 {
                 return None;
@@ -96,6 +106,10 @@ impl<T: Copy> RadixHeap<T> {
                 self.buckets[i] = moved;
                 continue;
             }
+            // Every item of bucket 0 has the key `last`.
+            if self.last > ceiling {
+                return None;
+            }
             self.len -= 1;
             let popped = self.buckets[0].pop();
             if let Some((_, item)) = &popped {
@@ -107,8 +121,12 @@ impl<T: Copy> RadixHeap<T> {
         }
     }
 
+    /// Every queued item with its key, in no particular order.
+    pub(crate) fn items(&self) -> impl Iterator<Item = &[(u64, T)]> {
+        self.buckets.iter().map(Vec::as_slice)
+    }
+
     /// Number of queued items.
-    #[cfg(test)]
     pub(crate) fn len(&self) -> usize {
         self.len
     }
