@@ -22,19 +22,25 @@
 
 use glam::{DVec3, Vec2, Vec3, Vec4};
 use horizon_mesh::{InstancedMesh, Submesh};
+use rayon::prelude::*;
 
 use crate::options::SimplifyOptions;
 use crate::quadric::Quadric;
 use crate::radix_heap::RadixHeap;
 use crate::weights::{FlipGuard, InstanceSet};
+use crate::weld::Weld;
 
 mod sweep;
+mod workspace;
+
+pub use workspace::Workspace;
 
 const DEAD: u32 = u32::MAX;
 
-/// Scratch memory reused between simplifications: every buffer keeps its capacity.
-#[derive(Debug)]
-pub struct Workspace {
+/// One part of a [`Workspace`]: the pieces of the mesh it was given, loaded into one set of
+/// arrays. Every buffer keeps its capacity between simplifications.
+#[derive(Debug, Default)]
+struct Part {
     // Position vertices: what a cost evaluation reads, together (two cache lines each).
     verts: Vec<Vert>,
     stamp: Vec<u32>,
@@ -55,12 +61,8 @@ pub struct Workspace {
     tri_r: Vec<u32>,
     ring: Vec<u32>,
     pairs: Vec<[u32; 2]>,
-    // Per submesh.
+    // Per loaded submesh (the same list in every part of a workspace).
     subs: Vec<SubInfo>,
-    /// How the first part of the order is swept (see [`sweep`]).
-    sweep: sweep::Settings,
-    /// What the last run's sweeps did.
-    swept: sweep::Outcome,
 }
 
 /// A position vertex: what planning a collapse reads, in two cache lines.
@@ -198,6 +200,26 @@ struct Plan {
     full: bool,
 }
 
+/// Which positions [`Part::load`] takes: those `owners[submesh][position]` gives to `part`,
+/// one of `parts`.
+#[derive(Clone, Copy)]
+struct Only<'a> {
+    owners: &'a [Vec<u8>],
+    part: u8,
+    parts: usize,
+}
+
+/// What [`Part::classify_edges`] finds around a run of vertices.
+#[derive(Default)]
+struct EdgeKinds {
+    boundary: Vec<u32>,
+    locked: Vec<u32>,
+    /// (vertex, neighbour, triangle, weight) of every boundary or seam edge, once.
+    constraints: Vec<(u32, u32, u32, f64)>,
+    /// Scratch: the edge ends around the current vertex.
+    entries: Vec<(u32, u32, u32, u32)>,
+}
+
 /// What became of one candidate taken off a queue.
 enum Step {
     /// The plan or the checks refused it.
@@ -216,43 +238,13 @@ pub(crate) struct RunStats {
     pub error: f64,
 }
 
-impl Default for Workspace {
-    fn default() -> Self {
-        Self {
-            verts: Vec::new(),
-            stamp: Vec::new(),
-            vsub: Vec::new(),
-            wedge_pos: Vec::new(),
-            uv: Vec::new(),
-            normal: Vec::new(),
-            color: Vec::new(),
-            tris: Vec::new(),
-            adj: Vec::new(),
-            generation: 0,
-            heap: RadixHeap::default(),
-            tri_k: Vec::new(),
-            tri_r: Vec::new(),
-            ring: Vec::new(),
-            pairs: Vec::new(),
-            subs: Vec::new(),
-            sweep: sweep::Settings::default(),
-            swept: sweep::Outcome::None,
-        }
-    }
-}
-
-impl Workspace {
-    /// An empty workspace.
-    pub fn new() -> Self {
-        Self::default()
-    }
-
+impl Part {
     /// Checks the state the last simplification left: every live triangle has three distinct,
     /// live position vertices of its own submesh, every vertex's adjacency names only
     /// triangles that hold it, and, the no-flip promise, no triangle faces more than 90
     /// degrees away from its input normal in any instance (in the exact f64 positions, before
     /// export rounds them).
-    pub fn validate(&self) -> Result<(), String> {
+    fn validate(&self) -> Result<(), String> {
         for (si, sub) in self.subs.iter().enumerate() {
             for t in sub.tri_base..sub.tri_end {
                 if !self.alive(t) {
@@ -296,19 +288,32 @@ impl Workspace {
         Ok(())
     }
 
-    /// Stage 1: loads every instanced submesh of `mesh`, welds positions, and classifies
-    /// boundary, seam and non-manifold vertices. Returns the expanded triangle count loaded.
-    pub(crate) fn load(&mut self, mesh: &InstancedMesh, sets: &[InstanceSet]) -> u64 {
+    /// Stage 1: loads the instanced submeshes of `mesh` (`welds[s]` numbers the positions of
+    /// submesh `s`, `None` for one that draws nothing), or with `only = (owners, part)` just
+    /// the positions `owners[s]` gives to `part`, with their wedges and triangles. Then
+    /// classifies seams. Returns the expanded triangle count loaded.
+    fn load(
+        &mut self,
+        mesh: &InstancedMesh,
+        sets: &[InstanceSet],
+        welds: &[Option<Weld>],
+        only: Option<Only<'_>>,
+    ) -> u64 {
         self.clear();
-        // Room for everything up front, so that no array is copied while it grows.
+        // Room for everything up front (a part's share of it), so that no array is copied
+        // while it grows.
+        let share = only.map_or(1, |o| o.parts);
         let loaded = || {
             mesh.submeshes
                 .iter()
-                .zip(sets)
-                .filter(|(sub, set)| set.count() > 0 && !sub.indices.is_empty())
+                .zip(welds)
+                .filter(|(_, weld)| weld.is_some())
         };
-        let wedges: usize = loaded().map(|(sub, _)| sub.positions.len()).sum();
-        let tris: usize = loaded().map(|(sub, _)| sub.indices.len() / 3).sum();
+        let wedges: usize = loaded().map(|(sub, _)| sub.positions.len()).sum::<usize>() / share;
+        let tris: usize = loaded()
+            .map(|(sub, _)| sub.indices.len() / 3)
+            .sum::<usize>()
+            / share;
         self.verts.reserve(wedges);
         self.vsub.reserve(wedges);
         self.wedge_pos.reserve(wedges);
@@ -317,14 +322,14 @@ impl Workspace {
         self.color.reserve(wedges);
         self.tris.reserve(tris);
         let mut expanded = 0u64;
-        for (s, (sub, set)) in mesh.submeshes.iter().zip(sets).enumerate() {
-            if set.count() == 0 || sub.indices.is_empty() {
+        for (s, ((sub, set), weld)) in mesh.submeshes.iter().zip(sets).zip(welds).enumerate() {
+            let Some(weld) = weld else {
                 continue;
-            }
+            };
             let sub_id = self.subs.len() as u32;
-            let wedge_base = self.wedge_pos.len() as u32;
             let tri_base = self.tris.len() as u32;
-            self.load_submesh(sub, sub_id, wedge_base);
+            let owner = only.map(|o| (&o.owners[s][..], o.part));
+            self.load_submesh(sub, weld, owner, sub_id);
             let tri_end = self.tris.len() as u32;
             expanded += u64::from(tri_end - tri_base) * set.count() as u64;
             self.subs.push(SubInfo {
@@ -361,19 +366,34 @@ impl Workspace {
         self.adj.clear();
     }
 
-    fn load_submesh(&mut self, sub: &Submesh, sub_id: u32, wedge_base: u32) {
-        let mut weld = crate::weld::Welder::with_capacity(sub.positions.len());
+    /// Appends one submesh, or with `owner = (owners, part)` the positions `owners` gives to
+    /// `part` (with their wedges, and the triangles on them). Positions, wedges and triangles
+    /// keep their input order.
+    fn load_submesh(
+        &mut self,
+        sub: &Submesh,
+        weld: &Weld,
+        owner: Option<(&[u8], u8)>,
+        sub_id: u32,
+    ) {
+        let mine = |id: u32| owner.is_none_or(|(owners, part)| owners[id as usize] == part);
+        let mut vert_of = vec![DEAD; weld.positions as usize];
+        let mut wedge_of = vec![DEAD; sub.positions.len()];
         for (i, p) in sub.positions.iter().enumerate() {
-            let next = self.verts.len() as u32;
-            let id = weld.id(*p, next);
-            if id == next {
+            let id = weld.ids[i];
+            if !mine(id) {
+                continue;
+            }
+            if vert_of[id as usize] == DEAD {
+                vert_of[id as usize] = self.verts.len() as u32;
                 self.verts.push(Vert {
                     pos: p.as_dvec3(),
                     ..Vert::default()
                 });
                 self.vsub.push(sub_id);
             }
-            self.wedge_pos.push(id);
+            wedge_of[i] = self.wedge_pos.len() as u32;
+            self.wedge_pos.push(vert_of[id as usize]);
             self.uv.push(sub.uvs.as_ref().map_or(Vec2::ZERO, |u| u[i]));
             self.normal
                 .push(sub.normals.as_ref().map_or(Vec3::ZERO, |n| n[i]));
@@ -381,15 +401,17 @@ impl Workspace {
                 .push(sub.colors.as_ref().map_or(Vec4::ONE, |c| c[i]));
         }
         for t in sub.indices.chunks_exact(3) {
-            let w = [t[0] + wedge_base, t[1] + wedge_base, t[2] + wedge_base];
-            let p = w.map(|w| self.wedge_pos[w as usize]);
+            let ids = [t[0], t[1], t[2]].map(|i| weld.ids[i as usize]);
             // A triangle with a repeated position is a point or a segment: it draws nothing
             // and would only confuse the topology, so it is dropped (the count goes down).
-            if p[0] != p[1] && p[1] != p[2] && p[0] != p[2] {
-                let [a, b, c] = p.map(|v| self.verts[v as usize].pos);
-                let n = encode_normal((b - a).cross(c - a));
-                self.tris.push(Tri { w, p, n });
+            if ids[0] == ids[1] || ids[1] == ids[2] || ids[0] == ids[2] || !mine(ids[0]) {
+                continue;
             }
+            let w = [t[0], t[1], t[2]].map(|i| wedge_of[i as usize]);
+            let p = ids.map(|id| vert_of[id as usize]);
+            let [a, b, c] = p.map(|v| self.verts[v as usize].pos);
+            let n = encode_normal((b - a).cross(c - a));
+            self.tris.push(Tri { w, p, n });
         }
     }
 
@@ -450,85 +472,64 @@ impl Workspace {
     /// Stage 2: quadrics. Face planes come from `face_quadric` (which folds in every
     /// instance); boundary and seam edges add constraint planes from `edge_constraint`.
     /// Vertices on non-manifold edges are locked.
-    pub(crate) fn build_quadrics(&mut self, sets: &[InstanceSet], options: &SimplifyOptions) {
-        // Face quadrics, submesh by submesh.
-        for si in 0..self.subs.len() {
-            let info = self.subs[si].clone();
-            let set = &sets[info.source];
+    fn build_quadrics(&mut self, sets: &[InstanceSet], options: &SimplifyOptions) {
+        // Face weights, submesh by submesh: each folds in the submesh's instances.
+        let mut weights: Vec<(f64, f64)> = Vec::with_capacity(self.tris.len());
+        for info in &self.subs {
             let tris = &self.tris[info.tri_base as usize..info.tri_end as usize];
+            let verts = &self.verts;
             let normals: Vec<DVec3> = tris
-                .iter()
+                .par_iter()
+                .with_min_len(4096)
                 .map(|t| {
-                    let [a, b, c] = t.p.map(|v| self.verts[v as usize].pos);
+                    let [a, b, c] = t.p.map(|v| verts[v as usize].pos);
                     (b - a).cross(c - a)
                 })
                 .collect();
-            let weights = set.face_weights(&normals);
-            for (k, t) in tris.iter().enumerate() {
-                let n2 = normals[k];
-                let len = n2.length();
-                if len == 0.0 {
-                    continue;
-                }
-                let n = n2 / len;
-                let area = 0.5 * len;
-                let (w_plane, w_area) = weights[k];
-                let a = self.verts[t.p[0] as usize].pos;
-                let q =
-                    Quadric::from_plane(n, -n.dot(a), area * w_plane).with_weight(area * w_area);
-                for &v in &t.p {
-                    self.verts[v as usize].quadric += q;
-                }
-            }
+            weights.extend(sets[info.source].face_weights(&normals));
         }
-        // Boundary, seam and non-manifold edges, found vertex by vertex.
+        // Face quadrics, vertex by vertex (in parallel), each summing its triangles' planes in
+        // triangle order.
+        let pos: Vec<DVec3> = self.verts.iter().map(|v| v.pos).collect();
+        let (tris, adj) = (&self.tris, &self.adj);
+        self.verts
+            .par_iter_mut()
+            .with_min_len(4096)
+            .for_each(|vert| {
+                let start = vert.adj_start as usize;
+                for &t in &adj[start..start + vert.adj_len as usize] {
+                    let [a, b, c] = tris[t as usize].p.map(|v| pos[v as usize]);
+                    let n2 = (b - a).cross(c - a);
+                    let len = n2.length();
+                    if len == 0.0 {
+                        continue;
+                    }
+                    let n = n2 / len;
+                    let area = 0.5 * len;
+                    let (w_plane, w_area) = weights[t as usize];
+                    vert.quadric += Quadric::from_plane(n, -n.dot(a), area * w_plane)
+                        .with_weight(area * w_area);
+                }
+            });
+        // Boundary, seam and non-manifold edges, found vertex by vertex (in parallel, then
+        // applied in vertex order).
+        let found: Vec<EdgeKinds> = (0..self.verts.len() as u32)
+            .into_par_iter()
+            .with_min_len(4096)
+            .fold(EdgeKinds::default, |mut found, v| {
+                self.classify_edges(v, options, &mut found);
+                found
+            })
+            .collect();
         let mut constraints: Vec<(u32, u32, u32, f64)> = Vec::new();
-        // (neighbour, triangle, wedge at v, wedge at neighbour)
-        let mut entries: Vec<(u32, u32, u32, u32)> = Vec::new();
-        for v in 0..self.verts.len() as u32 {
-            entries.clear();
-            for &t in self.tris_of(v) {
-                let tri = self.tris[t as usize].w;
-                let tp = self.tris[t as usize].p;
-                for c in 0..3 {
-                    if tp[c] == v {
-                        for d in [(c + 1) % 3, (c + 2) % 3] {
-                            let u = tp[d];
-                            entries.push((u, t, tri[c], tri[d]));
-                        }
-                    }
-                }
+        for found in found {
+            for v in found.boundary {
+                self.verts[v as usize].boundary = true;
             }
-            entries.sort_unstable();
-            let mut i = 0;
-            while i < entries.len() {
-                let mut j = i;
-                while j < entries.len() && entries[j].0 == entries[i].0 {
-                    j += 1;
-                }
-                let u = entries[i].0;
-                let group = &entries[i..j];
-                match group.len() {
-                    1 => {
-                        self.verts[v as usize].boundary = true;
-                        if v < u {
-                            constraints.push((v, u, group[0].1, options.boundary_weight));
-                        }
-                    }
-                    2 => {
-                        let seam = group[0].2 != group[1].2 || group[0].3 != group[1].3;
-                        if seam && v < u {
-                            constraints.push((v, u, group[0].1, options.seam_weight));
-                            constraints.push((v, u, group[1].1, options.seam_weight));
-                        }
-                    }
-                    _ => {
-                        self.verts[v as usize].locked = true;
-                        self.verts[u as usize].locked = true;
-                    }
-                }
-                i = j;
+            for v in found.locked {
+                self.verts[v as usize].locked = true;
             }
+            constraints.extend(found.constraints);
         }
         for &(a, b, t, weight) in &constraints {
             if weight <= 0.0 {
@@ -552,6 +553,58 @@ impl Workspace {
             for v in &mut self.verts {
                 v.locked |= v.boundary;
             }
+        }
+    }
+
+    /// The edges around `v` that end at a neighbour with one triangle (boundary), two with
+    /// different wedges (seam) or more (non-manifold), into `found`.
+    fn classify_edges(&self, v: u32, options: &SimplifyOptions, found: &mut EdgeKinds) {
+        // (neighbour, triangle, wedge at v, wedge at neighbour)
+        let entries = &mut found.entries;
+        entries.clear();
+        for &t in self.tris_of(v) {
+            let tri = self.tris[t as usize].w;
+            let tp = self.tris[t as usize].p;
+            for c in 0..3 {
+                if tp[c] == v {
+                    for d in [(c + 1) % 3, (c + 2) % 3] {
+                        entries.push((tp[d], t, tri[c], tri[d]));
+                    }
+                }
+            }
+        }
+        entries.sort_unstable();
+        let mut i = 0;
+        while i < entries.len() {
+            let mut j = i;
+            while j < entries.len() && entries[j].0 == entries[i].0 {
+                j += 1;
+            }
+            let u = entries[i].0;
+            let group = &entries[i..j];
+            match group.len() {
+                1 => {
+                    found.boundary.push(v);
+                    if v < u {
+                        found
+                            .constraints
+                            .push((v, u, group[0].1, options.boundary_weight));
+                    }
+                }
+                2 => {
+                    let seam = group[0].2 != group[1].2 || group[0].3 != group[1].3;
+                    if seam && v < u {
+                        found
+                            .constraints
+                            .push((v, u, group[0].1, options.seam_weight));
+                        found
+                            .constraints
+                            .push((v, u, group[1].1, options.seam_weight));
+                    }
+                }
+                _ => found.locked.extend([v, u]),
+            }
+            i = j;
         }
     }
 
@@ -729,95 +782,6 @@ impl Workspace {
                 }
             }
         }
-    }
-
-    /// Stage 3: collapses in one global order of cost until the expanded count reaches
-    /// `target`, the error bound is hit, or nothing more can collapse.
-    ///
-    /// Where the mesh falls into many separate pieces, the first and largest part of the work
-    /// runs piece by piece in sweeps of rising cost (see [`sweep`]), which keeps each piece in
-    /// cache; the sweeps end in exactly the state of the single queue, which takes over for the
-    /// rest. `None` means a sweep went past the target: the caller loads the mesh again and
-    /// runs [`Self::run_strict`].
-    pub(crate) fn run(
-        &mut self,
-        expanded: u64,
-        target: u64,
-        options: &SimplifyOptions,
-    ) -> Option<RunStats> {
-        let mut stats = RunStats {
-            expanded,
-            ..RunStats::default()
-        };
-        self.swept = sweep::Outcome::None;
-        let queued = if options.max_error.is_none() && self.sweep.share > 0.0 {
-            let queued = self.sweep(&mut stats, target);
-            self.swept = match queued {
-                None => sweep::Outcome::ReachedTarget,
-                Some(true) => sweep::Outcome::Swept,
-                Some(false) => sweep::Outcome::None,
-            };
-            queued?
-        } else {
-            false
-        };
-        Some(self.run_queue(stats, target, options, queued))
-    }
-
-    /// Stage 3 in one queue from the start: [`Self::run`] without the sweeps.
-    pub(crate) fn run_strict(
-        &mut self,
-        expanded: u64,
-        target: u64,
-        options: &SimplifyOptions,
-    ) -> RunStats {
-        let stats = RunStats {
-            expanded,
-            ..RunStats::default()
-        };
-        self.run_queue(stats, target, options, false)
-    }
-
-    /// The collapse loop over the global queue; `queued` when the queue already holds the
-    /// first round's candidates (left by the sweeps), otherwise every round seeds it afresh.
-    fn run_queue(
-        &mut self,
-        mut stats: RunStats,
-        target: u64,
-        options: &SimplifyOptions,
-        mut queued: bool,
-    ) -> RunStats {
-        let max_cost_error = options.max_error.unwrap_or(f64::INFINITY);
-        'rounds: while stats.expanded > target {
-            if !std::mem::take(&mut queued) {
-                self.seed_heap();
-            }
-            let before = stats.collapses;
-            while stats.expanded > target {
-                // Entries older than an endpoint's last change are stale: dropped unseen.
-                let stamp = &self.stamp;
-                let Some((_, c)) = self.heap.pop_valid(|c| {
-                    stamp[c.p as usize] == c.stamp_p && stamp[c.q as usize] == c.stamp_q
-                }) else {
-                    break;
-                };
-                match self.step(c, &mut stats, max_cost_error) {
-                    Step::Rejected => {}
-                    Step::OverBound => break 'rounds,
-                    Step::Collapsed(keep) => {
-                        let ring = std::mem::take(&mut self.ring);
-                        for &u in &ring {
-                            self.push(keep, u);
-                        }
-                        self.ring = ring;
-                    }
-                }
-            }
-            if stats.collapses == before {
-                break;
-            }
-        }
-        stats
     }
 
     /// Whether candidate `c` is current: neither endpoint changed since it was queued.
@@ -1192,75 +1156,6 @@ impl Workspace {
                 self.verts[v as usize].wedge_count = self.wedges_at(v).0 as u8;
             }
         }
-    }
-
-    /// Stage 4: the simplified mesh: surviving wedges of each submesh, compacted, with the
-    /// input's materials, textures and instances. Submeshes left without triangles go, with
-    /// their instances.
-    /// The simplified mesh, and for every input submesh its index in the output (`None` when it
-    /// lost all its triangles and was dropped with its instances).
-    pub(crate) fn assemble(&self, mesh: &InstancedMesh) -> (InstancedMesh, Vec<Option<usize>>) {
-        let mut out_subs: Vec<Option<Submesh>> = mesh.submeshes.iter().cloned().map(Some).collect();
-        let mut remap = vec![DEAD; self.wedge_pos.len()];
-        for info in &self.subs {
-            let mut sub = Submesh {
-                material: mesh.submeshes[info.source].material,
-                ..Submesh::default()
-            };
-            let mut positions = Vec::new();
-            let mut normals = Vec::new();
-            let mut uvs = Vec::new();
-            let mut colors = Vec::new();
-            for t in info.tri_base..info.tri_end {
-                if !self.alive(t) {
-                    continue;
-                }
-                for &w in &self.tris[t as usize].w {
-                    let wi = w as usize;
-                    if remap[wi] == DEAD {
-                        remap[wi] = positions.len() as u32;
-                        positions.push(self.verts[self.wedge_pos[wi] as usize].pos.as_vec3());
-                        normals.push(self.normal[wi]);
-                        uvs.push(self.uv[wi]);
-                        colors.push(self.color[wi]);
-                    }
-                    sub.indices.push(remap[wi]);
-                }
-            }
-            sub.positions = positions;
-            sub.normals = info.has_normals.then_some(normals);
-            sub.uvs = info.has_uvs.then_some(uvs);
-            sub.colors = info.has_colors.then_some(colors);
-            out_subs[info.source] = (!sub.indices.is_empty()).then_some(sub);
-        }
-        let mut index = vec![usize::MAX; out_subs.len()];
-        let mut submeshes = Vec::new();
-        for (i, s) in out_subs.into_iter().enumerate() {
-            if let Some(s) = s {
-                index[i] = submeshes.len();
-                submeshes.push(s);
-            }
-        }
-        let instances = mesh
-            .instances
-            .iter()
-            .filter(|i| index[i.submesh] != usize::MAX)
-            .map(|i| horizon_mesh::Instance {
-                submesh: index[i.submesh],
-                transform: i.transform,
-            })
-            .collect();
-        let out = InstancedMesh {
-            submeshes,
-            instances,
-            materials: mesh.materials.clone(),
-            textures: mesh.textures.clone(),
-        };
-        let kept = index
-            .into_iter()
-            .map(|i| (i != usize::MAX).then_some(i))
-            .collect();
-        (out, kept)
     }
 }
 

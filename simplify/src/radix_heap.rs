@@ -85,39 +85,43 @@ impl<T: Copy> RadixHeap<T> {
         ceiling: u64,
         mut valid: impl FnMut(&T) -> bool,
     ) -> Option<(u64, T)> {
+        let key = self.peek_valid(&mut valid)?;
+        if key > ceiling {
+            return None;
+        }
+        self.len -= 1;
+        self.buckets[0].pop()
+    }
+
+    /// The smallest key among the items `valid` accepts, dropping the rejected items it meets
+    /// (as [`Self::pop_valid`]). The item stays queued, on top of bucket 0, where the next
+    /// pop takes it.
+    pub(crate) fn peek_valid(&mut self, mut valid: impl FnMut(&T) -> bool) -> Option<u64> {
         loop {
-            if self.len == 0 {
-                return None;
-            }
-            if self.buckets[0].is_empty() {
-                let i = self.buckets.iter().position(|b| !b.is_empty())?;
-                let mut moved = std::mem::take(&mut self.buckets[i]);
-                let before = moved.len();
-                moved.retain(|(_, item)| valid(item));
-                self.len -= before - moved.len();
-                if let Some(min) = moved.iter().map(|&(k, _)| k).min() {
-                    self.last = min;
-                    for &(k, item) in &moved {
-                        let b = self.bucket(k);
-                        self.buckets[b].push((k, item));
+            match self.buckets[0].last() {
+                // Every item of bucket 0 has the key `last`.
+                Some((_, item)) if valid(item) => return Some(self.last),
+                Some(_) => {
+                    self.buckets[0].pop();
+                    self.len -= 1;
+                }
+                None => {
+                    let i = self.buckets.iter().position(|b| !b.is_empty())?;
+                    let mut moved = std::mem::take(&mut self.buckets[i]);
+                    let before = moved.len();
+                    moved.retain(|(_, item)| valid(item));
+                    self.len -= before - moved.len();
+                    if let Some(min) = moved.iter().map(|&(k, _)| k).min() {
+                        self.last = min;
+                        for &(k, item) in &moved {
+                            let b = self.bucket(k);
+                            self.buckets[b].push((k, item));
+                        }
                     }
-                }
-                moved.clear();
-                self.buckets[i] = moved;
-                continue;
-            }
-            // Every item of bucket 0 has the key `last`.
-            if self.last > ceiling {
-                return None;
-            }
-            self.len -= 1;
-            let popped = self.buckets[0].pop();
-            if let Some((_, item)) = &popped {
-                if !valid(item) {
-                    continue;
+                    moved.clear();
+                    self.buckets[i] = moved;
                 }
             }
-            return popped;
         }
     }
 

@@ -6,6 +6,37 @@ use std::hash::{BuildHasherDefault, Hasher};
 
 use glam::Vec3;
 
+/// A submesh's vertices numbered by position.
+#[derive(Debug, Clone)]
+pub(crate) struct Weld {
+    /// For every vertex, the number of its position among the distinct positions, in order
+    /// of first use.
+    pub ids: Vec<u32>,
+    /// How many distinct positions there are.
+    pub positions: u32,
+}
+
+/// Numbers the vertices of `sub` by position.
+pub(crate) fn weld(sub: &horizon_mesh::Submesh) -> Weld {
+    let mut welder = Welder::with_capacity(sub.positions.len());
+    let mut next = 0;
+    let ids = sub
+        .positions
+        .iter()
+        .map(|&p| {
+            let id = welder.id(p, next);
+            if id == next {
+                next += 1;
+            }
+            id
+        })
+        .collect();
+    Weld {
+        ids,
+        positions: next,
+    }
+}
+
 /// Gives each distinct position one id; `-0.0` and `0.0` weld.
 #[derive(Debug)]
 pub(crate) struct Welder {

@@ -14,10 +14,9 @@
 //! target, choosing θ from a sample of the queued keys. Once little is left, the pieces'
 //! queues pour into the single queue, which finishes the run in strict order.
 //!
-//! Pieces are also independent in memory, so on a large mesh the sweeps run in parallel: the
-//! groups of pieces are split into one part per thread, each copied into a workspace of its
-//! own, swept there and copied back. A group's sweep does not depend on where it runs, so the
-//! result is the same with any number of threads.
+//! Pieces are also independent in memory, so on a large mesh the sweeps run in parallel, one
+//! part of the workspace (whole pieces, see [`super::workspace`]) per thread. A group's sweep
+//! does not depend on where it runs, so the result is the same with any number of threads.
 //!
 //! The one case the argument does not cover: a sweep that reaches the target. The single queue
 //! would have stopped somewhere inside it, so the state is not one the strict order passes
@@ -27,7 +26,7 @@ use std::sync::atomic::{AtomicBool, AtomicI64, Ordering};
 
 use rayon::prelude::*;
 
-use super::{Candidate, RadixHeap, RunStats, Step, Tri, Workspace, DEAD};
+use super::{Candidate, Part, RadixHeap, RunStats, Step};
 
 /// Share of the remaining excess (triangles over the target) a sweep aims to remove. Sweeps
 /// remove less than they aim at (candidates fail their checks, and a collapse spoils its
@@ -42,9 +41,9 @@ const MAX_SWEEPS: usize = 16;
 /// that a mesh of many tiny pieces does not pay for a queue per piece.
 const GROUP_VERTICES: usize = 256;
 /// Queued keys sampled to choose a sweep's θ.
-const SAMPLE: usize = 1 << 16;
-/// Fewest position vertices a part must get for the sweeps to run in parallel: below it,
-/// copying the parts out and back costs more than the second thread saves.
+const SAMPLE: usize = 1 << 14;
+/// Fewest positions a part must get for the workspace to load one part per thread: below
+/// it, a second thread saves less than it costs.
 const PART_VERTICES: usize = 1 << 15;
 
 /// The sweeps' tuning, a field of every workspace so that tests can force each path.
@@ -52,7 +51,7 @@ const PART_VERTICES: usize = 1 << 15;
 pub(crate) struct Settings {
     /// Share of the excess a sweep aims at ([`SHARE`]); 0 runs one queue from the start.
     pub share: f64,
-    /// Fewest vertices a part may get ([`PART_VERTICES`]).
+    /// Fewest positions a part may get ([`PART_VERTICES`]).
     pub part_vertices: usize,
 }
 
@@ -79,84 +78,96 @@ pub(crate) enum Outcome {
 /// A group's own queue.
 type Queue = RadixHeap<Candidate>;
 
-/// A share of the groups, swept in a workspace of its own.
-struct Part {
-    ws: Workspace,
-    /// Each group's position vertices, in `ws`'s numbering.
-    groups: Vec<Vec<u32>>,
+/// A part's groups and their queues, while the sweeps run.
+struct Lane {
     queues: Vec<Queue>,
     stats: RunStats,
-    /// Where `ws`'s vertices, triangles and wedges sit in the whole workspace; `None` when
-    /// `ws` is the whole workspace, moved out for the sweeps.
-    map: Option<PartMap>,
 }
 
-/// Local to global numbering of a part.
-struct PartMap {
-    verts: Vec<u32>,
-    tris: Vec<u32>,
-    wedges: Vec<u32>,
+impl Lane {
+    /// The count a lane's statistics start from: they only ever go down by its removals.
+    const START: u64 = u64::MAX / 2;
 }
 
-impl Workspace {
-    /// Sweeps the start of the collapse order. Returns whether the global queue now holds the
-    /// rest of the first round (false: no sweep ran and nothing changed), or `None` when a
-    /// sweep reached `target`, leaving a state off the strict order.
-    pub(super) fn sweep(&mut self, stats: &mut RunStats, target: u64) -> Option<bool> {
-        if stats.expanded <= target {
-            return Some(false);
+/// Sweeps the start of the collapse order over `parts`, each sweep aiming to remove `share`
+/// of the excess. Returns whether the parts' queues now hold the rest of the first round
+/// (false: no sweep ran and nothing changed), or `None` when a sweep reached `target`,
+/// leaving a state off the strict order.
+pub(super) fn sweep(
+    parts: &mut [Part],
+    share: f64,
+    stats: &mut RunStats,
+    target: u64,
+) -> Option<bool> {
+    if stats.expanded <= target {
+        return Some(false);
+    }
+    let groups: Vec<Vec<Vec<u32>>> = parts.par_iter().map(Part::groups).collect();
+    if groups.iter().map(Vec::len).sum::<usize>() < 2 {
+        return Some(false);
+    }
+    let mut lanes: Vec<Lane> = parts
+        .par_iter_mut()
+        .zip(groups)
+        .map(|(part, groups)| Lane {
+            queues: groups.iter().map(|g| part.seed_group(g)).collect(),
+            stats: RunStats {
+                expanded: Lane::START,
+                ..RunStats::default()
+            },
+        })
+        .collect();
+    let first = stats.expanded - target;
+    // How many more expanded triangles the sweeps may remove before they reach the target.
+    let budget = AtomicI64::new(first as i64);
+    let mut reached = false;
+    for _ in 0..MAX_SWEEPS {
+        let excess = budget.load(Ordering::Relaxed);
+        if (excess as f64) < TAIL * first as f64 {
+            break;
         }
-        let groups = self.groups();
-        if groups.len() < 2 {
-            return Some(false);
-        }
-        // Read before `split`, which may move this workspace into the one part.
-        let share = self.sweep.share;
-        let first = stats.expanded - target;
-        // How many more expanded triangles the sweeps may remove before they reach the target.
-        let budget = AtomicI64::new(first as i64);
-        let mut parts = self.split(groups);
-        parts.par_iter_mut().for_each(|part| {
-            part.queues = part.groups.iter().map(|g| part.ws.seed_group(g)).collect();
-        });
-        let mut reached = false;
-        for _ in 0..MAX_SWEEPS {
-            let excess = budget.load(Ordering::Relaxed);
-            if (excess as f64) < TAIL * first as f64 {
-                break;
-            }
-            let Some(theta) = threshold(&parts, share * excess as f64) else {
-                break;
-            };
-            let stop = AtomicBool::new(false);
-            parts.par_iter_mut().for_each(|part| {
-                for queue in &mut part.queues {
+        let Some(theta) = threshold(parts, &lanes, share * excess as f64) else {
+            break;
+        };
+        let stop = AtomicBool::new(false);
+        parts
+            .par_iter_mut()
+            .zip(&mut lanes)
+            .for_each(|(part, lane)| {
+                for queue in &mut lane.queues {
                     if stop.load(Ordering::Relaxed)
-                        || !part.ws.sweep_queue(queue, theta, &mut part.stats, &budget)
+                        || !part.sweep_queue(queue, theta, &mut lane.stats, &budget)
                     {
                         stop.store(true, Ordering::Relaxed);
                         return;
                     }
                 }
             });
-            if stop.into_inner() {
-                reached = true;
-                break;
-            }
+        if stop.into_inner() {
+            reached = true;
+            break;
         }
-        let queues = self.join(parts, stats);
-        if reached {
-            return None;
-        }
-        self.heap.clear();
-        for &(key, c) in queues.iter().flat_map(RadixHeap::items).flatten() {
-            if self.is_current(&c) {
-                self.heap.push(key, c);
-            }
-        }
-        Some(true)
     }
+    for lane in &lanes {
+        stats.expanded -= Lane::START - lane.stats.expanded;
+        stats.collapses += lane.stats.collapses;
+        stats.error = stats.error.max(lane.stats.error);
+    }
+    if reached {
+        return None;
+    }
+    parts.par_iter_mut().zip(lanes).for_each(|(part, lane)| {
+        part.heap.clear();
+        for &(key, c) in lane.queues.iter().flat_map(RadixHeap::items).flatten() {
+            if part.is_current(&c) {
+                part.heap.push(key, c);
+            }
+        }
+    });
+    Some(true)
+}
 
+impl Part {
     /// Runs one group's queue until its next key is above `theta`. False when the removals
     /// used up `budget` on the way (the count reached the target).
     fn sweep_queue(
@@ -190,7 +201,7 @@ impl Workspace {
         }
     }
 
-    /// Every edge of a group once (as [`Workspace::seed_heap`] queues them), into a new queue.
+    /// Every edge of a group once (as [`Part::seed_heap`] queues them), into a new queue.
     fn seed_group(&mut self, group: &[u32]) -> Queue {
         let mut queue = Queue::default();
         for &v in group {
@@ -247,242 +258,26 @@ impl Workspace {
         out.retain(|g| !g.is_empty());
         out
     }
-
-    /// The groups in one part per thread, each copied into a workspace of its own; or, for a
-    /// small mesh or one thread, one part that is this workspace, moved out.
-    fn split(&mut self, groups: Vec<Vec<u32>>) -> Vec<Part> {
-        let total: usize = groups.iter().map(Vec::len).sum();
-        let count = rayon::current_num_threads()
-            .min(total / self.sweep.part_vertices.max(1))
-            .min(groups.len());
-        if count < 2 {
-            let ws = std::mem::take(self);
-            return vec![Part::new(ws, groups, None)];
-        }
-        // Consecutive groups, about `total / count` vertices a part.
-        let mut shares: Vec<Vec<Vec<u32>>> = vec![Vec::new()];
-        let mut filled = 0;
-        for group in groups {
-            if filled * count >= total * shares.len() && shares.len() < count {
-                shares.push(Vec::new());
-            }
-            filled += group.len();
-            shares.last_mut().expect("one share").push(group);
-        }
-        // Local numbers, one part after another: vertices, then the triangles of each vertex
-        // that lists them first, then the wedges of those triangles.
-        let mut local_vert = vec![DEAD; self.verts.len()];
-        let mut local_tri = vec![DEAD; self.tris.len()];
-        let mut local_wedge = vec![DEAD; self.wedge_pos.len()];
-        let maps: Vec<PartMap> = shares
-            .iter()
-            .map(|share| {
-                let verts: Vec<u32> = share.iter().flatten().copied().collect();
-                for (l, &v) in verts.iter().enumerate() {
-                    local_vert[v as usize] = l as u32;
-                }
-                let mut tris = Vec::new();
-                let mut wedges = Vec::new();
-                for &v in &verts {
-                    for &t in self.tris_of(v) {
-                        let tri = self.tris[t as usize];
-                        if tri.p[0] != v {
-                            continue;
-                        }
-                        local_tri[t as usize] = tris.len() as u32;
-                        tris.push(t);
-                        for w in tri.w {
-                            if local_wedge[w as usize] == DEAD {
-                                local_wedge[w as usize] = wedges.len() as u32;
-                                wedges.push(w);
-                            }
-                        }
-                    }
-                }
-                PartMap {
-                    verts,
-                    tris,
-                    wedges,
-                }
-            })
-            .collect();
-        let this = &*self;
-        let (lv, lt, lw) = (&local_vert, &local_tri, &local_wedge);
-        maps.into_par_iter()
-            .zip(shares)
-            .map(|(map, share)| {
-                let ws = this.extract(&map, lv, lt, lw);
-                let groups = share
-                    .into_iter()
-                    .map(|g| g.into_iter().map(|v| lv[v as usize]).collect())
-                    .collect();
-                Part::new(ws, groups, Some(map))
-            })
-            .collect()
-    }
-
-    /// A workspace holding just the vertices, triangles and wedges of `map`, renumbered.
-    fn extract(
-        &self,
-        map: &PartMap,
-        local_vert: &[u32],
-        local_tri: &[u32],
-        local_wedge: &[u32],
-    ) -> Workspace {
-        let mut ws = Workspace {
-            subs: self.subs.clone(),
-            sweep: self.sweep,
-            ..Workspace::default()
-        };
-        ws.verts.reserve(map.verts.len());
-        for &v in &map.verts {
-            let mut vert = self.verts[v as usize];
-            vert.mark = 0;
-            vert.adj_start = ws.adj.len() as u32;
-            ws.adj
-                .extend(self.tris_of(v).iter().map(|&t| local_tri[t as usize]));
-            ws.verts.push(vert);
-            ws.stamp.push(self.stamp[v as usize]);
-            ws.vsub.push(self.vsub[v as usize]);
-        }
-        // Room for the lists collapses append, as `build_adjacency` leaves.
-        ws.adj.reserve(ws.adj.len());
-        for &w in &map.wedges {
-            let w = w as usize;
-            ws.wedge_pos.push(local_vert[self.wedge_pos[w] as usize]);
-            ws.uv.push(self.uv[w]);
-            ws.normal.push(self.normal[w]);
-            ws.color.push(self.color[w]);
-        }
-        ws.tris.extend(map.tris.iter().map(|&t| {
-            let tri = self.tris[t as usize];
-            Tri {
-                w: tri.w.map(|w| local_wedge[w as usize]),
-                p: tri.p.map(|v| local_vert[v as usize]),
-                n: tri.n,
-            }
-        }));
-        ws
-    }
-
-    /// Takes the parts back (copying each into place, or moving the whole workspace back),
-    /// adds their collapses to `stats`, and returns their queues in this workspace's numbering.
-    fn join(&mut self, parts: Vec<Part>, stats: &mut RunStats) -> Vec<Queue> {
-        let mut queues = Vec::new();
-        for part in parts {
-            let Part {
-                ws,
-                queues: part_queues,
-                stats: part_stats,
-                map,
-                ..
-            } = part;
-            stats.expanded -= Part::START - part_stats.expanded;
-            stats.collapses += part_stats.collapses;
-            stats.error = stats.error.max(part_stats.error);
-            let Some(map) = map else {
-                *self = ws;
-                queues.extend(part_queues);
-                continue;
-            };
-            self.absorb(&ws, &map);
-            for queue in part_queues {
-                let mut global = Queue::default();
-                for &(key, c) in queue.items().flatten() {
-                    let (p, q) = (map.verts[c.p as usize], map.verts[c.q as usize]);
-                    global.push(key, Candidate { p, q, ..c });
-                }
-                queues.push(global);
-            }
-        }
-        queues
-    }
-
-    /// Copies a part's state into place: its vertices, triangles and wedges over the ones it
-    /// was cut from, its new wedges and adjacency lists appended.
-    fn absorb(&mut self, ws: &Workspace, map: &PartMap) {
-        let mut wedge = map.wedges.clone();
-        for lw in map.wedges.len()..ws.wedge_pos.len() {
-            wedge.push(self.wedge_pos.len() as u32);
-            self.wedge_pos.push(DEAD);
-            self.uv.push(ws.uv[lw]);
-            self.normal.push(ws.normal[lw]);
-            self.color.push(ws.color[lw]);
-        }
-        for (lw, &w) in wedge.iter().enumerate() {
-            let w = w as usize;
-            let at = ws.wedge_pos[lw];
-            self.wedge_pos[w] = if at == DEAD {
-                DEAD
-            } else {
-                map.verts[at as usize]
-            };
-            self.uv[w] = ws.uv[lw];
-            self.normal[w] = ws.normal[lw];
-            self.color[w] = ws.color[lw];
-        }
-        for (lt, &t) in map.tris.iter().enumerate() {
-            let tri = ws.tris[lt];
-            self.tris[t as usize] = Tri {
-                w: tri.w.map(|w| wedge[w as usize]),
-                p: if tri.p[0] == DEAD {
-                    [DEAD; 3]
-                } else {
-                    tri.p.map(|v| map.verts[v as usize])
-                },
-                n: tri.n,
-            };
-        }
-        for (l, &v) in map.verts.iter().enumerate() {
-            let mut vert = ws.verts[l];
-            // Marks are compared with this workspace's generations from here on.
-            vert.mark = 0;
-            vert.adj_start = self.adj.len() as u32;
-            self.adj
-                .extend(ws.tris_of(l as u32).iter().map(|&t| map.tris[t as usize]));
-            self.verts[v as usize] = vert;
-            self.stamp[v as usize] = ws.stamp[l];
-        }
-    }
 }
 
-impl Part {
-    /// The count a part's statistics start from: they only ever go down by its removals.
-    const START: u64 = u64::MAX / 2;
-
-    fn new(ws: Workspace, groups: Vec<Vec<u32>>, map: Option<PartMap>) -> Self {
-        Self {
-            ws,
-            groups,
-            queues: Vec::new(),
-            stats: RunStats {
-                expanded: Self::START,
-                ..RunStats::default()
-            },
-            map,
-        }
-    }
-}
-
-/// The key up to which the parts' queued current candidates would remove about `share`
-/// triangles, at two per collapse times the submesh's instances (an estimate: some candidates
-/// fail their checks, and collapses queue new ones). `None` when nothing is queued.
-fn threshold(parts: &[Part], share: f64) -> Option<u64> {
-    let total: usize = parts
+/// The key up to which the queued current candidates would remove about `share` triangles,
+/// at two per collapse times the submesh's instances (an estimate: some candidates fail their
+/// checks, and collapses queue new ones). `None` when nothing is queued.
+fn threshold(parts: &[Part], lanes: &[Lane], share: f64) -> Option<u64> {
+    let total: usize = lanes
         .iter()
-        .flat_map(|p| &p.queues)
+        .flat_map(|l| &l.queues)
         .map(RadixHeap::len)
         .sum();
     let stride = total.div_ceil(SAMPLE).max(1);
-    let mut sample: Vec<(u64, u64)> = Vec::with_capacity(total / stride + parts.len());
-    for part in parts {
-        let ws = &part.ws;
+    let mut sample: Vec<(u64, u64)> = Vec::with_capacity(total / stride + lanes.len());
+    for (part, lane) in parts.iter().zip(lanes) {
         let mut at = 0;
-        for entries in part.queues.iter().flat_map(RadixHeap::items) {
+        for entries in lane.queues.iter().flat_map(RadixHeap::items) {
             while at < entries.len() {
                 let (key, c) = &entries[at];
-                if ws.is_current(c) {
-                    let instances = ws.subs[ws.vsub[c.p as usize] as usize].instances;
+                if part.is_current(c) {
+                    let instances = part.subs[part.vsub[c.p as usize] as usize].instances;
                     sample.push((*key, 2 * instances.max(1)));
                 }
                 at += stride;
@@ -502,7 +297,7 @@ fn threshold(parts: &[Part], share: f64) -> Option<u64> {
 }
 
 /// The root of `x`'s piece, halving the path on the way.
-fn find(parent: &mut [u32], mut x: u32) -> u32 {
+pub(super) fn find(parent: &mut [u32], mut x: u32) -> u32 {
     while parent[x as usize] != x {
         let up = parent[parent[x as usize] as usize];
         parent[x as usize] = up;
@@ -512,7 +307,7 @@ fn find(parent: &mut [u32], mut x: u32) -> u32 {
 }
 
 /// Joins the pieces of `a` and `b` under the lesser root.
-fn union(parent: &mut [u32], a: u32, b: u32) {
+pub(super) fn union(parent: &mut [u32], a: u32, b: u32) {
     let (ra, rb) = (find(parent, a), find(parent, b));
     let (lo, hi) = (ra.min(rb), ra.max(rb));
     parent[hi as usize] = lo;
@@ -611,6 +406,25 @@ mod tests {
         part_vertices: usize,
         threads: usize,
     ) -> (InstancedMesh, u64, Outcome) {
+        run_with(
+            mesh,
+            ratio,
+            &SimplifyOptions::balanced(),
+            share,
+            part_vertices,
+            threads,
+        )
+    }
+
+    /// [`run`] with `options`.
+    fn run_with(
+        mesh: &InstancedMesh,
+        ratio: f64,
+        options: &SimplifyOptions,
+        share: f64,
+        part_vertices: usize,
+        threads: usize,
+    ) -> (InstancedMesh, u64, Outcome) {
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(threads)
             .build()
@@ -619,13 +433,8 @@ mod tests {
             let mut ws = Workspace::new();
             ws.sweep.share = share;
             ws.sweep.part_vertices = part_vertices;
-            let out = simplify_with(
-                mesh,
-                Target::Ratio(ratio),
-                &SimplifyOptions::balanced(),
-                &mut ws,
-            )
-            .expect("a valid mesh");
+            let out =
+                simplify_with(mesh, Target::Ratio(ratio), options, &mut ws).expect("a valid mesh");
             ws.validate().expect("a valid workspace");
             (out.mesh, out.report.collapses, ws.swept)
         })
@@ -661,6 +470,23 @@ mod tests {
             assert_eq!(collapses, strict_collapses);
             assert_eq!(out.submeshes, strict.submeshes);
         }
+    }
+
+    /// An error bound turns the sweeps off; parts still split the mesh, and the queue over
+    /// them stops at the bound exactly where one queue stops.
+    #[test]
+    fn an_error_bound_stops_every_part_where_one_queue_stops() {
+        let mesh = pieces(20, 11);
+        let options = SimplifyOptions {
+            max_error: Some(0.02),
+            ..SimplifyOptions::balanced()
+        };
+        let (strict, strict_collapses, _) = run_with(&mesh, 0.0, &options, 0.0, 64, 1);
+        assert!(strict_collapses > 0);
+        let (out, collapses, outcome) = run_with(&mesh, 0.0, &options, super::SHARE, 64, 2);
+        assert_eq!(outcome, Outcome::None);
+        assert_eq!(collapses, strict_collapses);
+        assert_eq!(out.submeshes, strict.submeshes);
     }
 
     /// One piece, or a mesh too small to split, is one group or one part: the sweeps leave it
