@@ -227,7 +227,7 @@ class Bench:
         glbs = [path] if path.suffix == ".glb" and name in GENERATED else []
         glbs += [pathlib.Path(m["glb"]) for m in entry["methods"].values() if m.get("glb")]
         log(f"[{name}] glTF-Validator on {len(glbs)} files")
-        reports = cs.validate(VALIDATE_MJS, glbs)
+        reports = ref.validate(VALIDATE_MJS, glbs)
         entry["validator"] = {pathlib.Path(k).name: v for k, v in reports.items()}
         for p in glbs:
             if str(p) not in reports:
@@ -505,8 +505,8 @@ def main():
                          " `cargo build --release -p horizon-server`")
     if shutil.which("node") is None:
         raise SystemExit("error: node is not on PATH (needed for the Khronos glTF-Validator)")
-    if not (pathlib.Path(cs.validator_dir()) / "node_modules" / "gltf-validator").is_dir():
-        raise SystemExit(f"error: no gltf-validator under {cs.validator_dir()}; run tests/run.sh once"
+    if not (pathlib.Path(ref.validator_dir()) / "node_modules" / "gltf-validator").is_dir():
+        raise SystemExit(f"error: no gltf-validator under {ref.validator_dir()}; run tests/run.sh once"
                          " or set GLTF_VALIDATOR_DIR")
     check = subprocess.run([args.python, "-c", "import fast_simplification, numpy"], capture_output=True)
     if check.returncode != 0:

@@ -27,6 +27,8 @@ pub struct Workspace {
     pub(super) sweep: sweep::Settings,
     /// What the last run's sweeps did.
     pub(super) swept: sweep::Outcome,
+    /// Distinct positions loaded.
+    positions: usize,
 }
 
 impl Default for Workspace {
@@ -36,6 +38,7 @@ impl Default for Workspace {
             layout: Vec::new(),
             sweep: sweep::Settings::default(),
             swept: sweep::Outcome::None,
+            positions: 0,
         }
     }
 }
@@ -71,6 +74,7 @@ impl Workspace {
             })
             .collect();
         let positions: usize = welds.iter().flatten().map(|w| w.positions as usize).sum();
+        self.positions = positions;
         let mut count = rayon::current_num_threads()
             .min(positions / self.sweep.part_vertices.max(1))
             .min(u8::MAX as usize);
@@ -146,7 +150,7 @@ impl Workspace {
     /// Stage 3: collapses in one global order of cost until the expanded count reaches
     /// `target`, the error bound is hit, or nothing more can collapse.
     ///
-    /// Where the mesh falls into many separate pieces, the first and largest part of the work
+    /// Where a large mesh falls into many separate pieces, the first and largest part of the work
     /// runs piece by piece in sweeps of rising cost (see [`sweep`]), which keeps each piece in
     /// cache; the sweeps end in exactly the state of the single queue, which takes over for the
     /// rest. `None` means a sweep went past the target: the caller loads the mesh again and
@@ -162,7 +166,9 @@ impl Workspace {
             ..RunStats::default()
         };
         self.swept = sweep::Outcome::None;
-        let queued = if options.max_error.is_none() && self.sweep.share > 0.0 {
+        // A mesh smaller than two parts' worth fits in cache as it is: it stays in one queue.
+        let large = self.positions >= 2 * self.sweep.part_vertices;
+        let queued = if options.max_error.is_none() && self.sweep.share > 0.0 && large {
             let queued = sweep::sweep(&mut self.parts, self.sweep.share, &mut stats, target);
             self.swept = match queued {
                 None => sweep::Outcome::ReachedTarget,
