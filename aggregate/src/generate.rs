@@ -17,7 +17,7 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use glam::{Affine3A, Vec3};
-use horizon_atlas::{build_atlas, AtlasOptions};
+use horizon_atlas::{build_atlas_with, AtlasOptions, TextureCache};
 use horizon_descriptors::calibrate::Table1;
 use horizon_mesh::{export_glb, ExportOptions, Instance, InstancedMesh, Material, Submesh};
 use horizon_simplify::{simplify, simplify_qem, SimplifyOptions, Target};
@@ -145,8 +145,20 @@ pub fn generate(
     table: &Table1,
     options: &AggregateOptions,
 ) -> Result<NodeOutput, AggregateError> {
+    generate_with(input, models, table, options, &TextureCache::new(0))
+}
+
+/// [`generate`], decoding the textures it atlases through `textures`, which the aggregates
+/// of one build share (the same bytes come out either way).
+pub fn generate_with(
+    input: &NodeInput,
+    models: &dyn ModelSource,
+    table: &Table1,
+    options: &AggregateOptions,
+    textures: &TextureCache,
+) -> Result<NodeOutput, AggregateError> {
     match options.method {
-        Method::Optimized => generate_optimized(input, models, table, options),
+        Method::Optimized => generate_optimized(input, models, table, options, textures),
         Method::Unoptimized => generate_unoptimized(input, models, options),
     }
 }
@@ -156,6 +168,7 @@ fn generate_optimized(
     models: &dyn ModelSource,
     table: &Table1,
     options: &AggregateOptions,
+    textures: &TextureCache,
 ) -> Result<NodeOutput, AggregateError> {
     let start = Instant::now();
     let mut stats = NodeStats {
@@ -281,7 +294,7 @@ fn generate_optimized(
             max_side: input.display.atlas_side(options),
             ..AtlasOptions::default()
         };
-        build_atlas(&simplified, &atlas_options)
+        build_atlas_with(&simplified, &atlas_options, textures)
             .map_err(|source| AggregateError::Atlas {
                 node: input.node,
                 source,

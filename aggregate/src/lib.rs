@@ -31,7 +31,9 @@ pub use build::{
     Progress, AUTO_ATLAS_BYTES, AUTO_ATLAS_TEXTURES,
 };
 pub use error::AggregateError;
-pub use generate::{generate, ExpandedPart, Handoff, NodeInput, NodeOutput, NodeStats, Placement};
+pub use generate::{
+    generate, generate_with, ExpandedPart, Handoff, NodeInput, NodeOutput, NodeStats, Placement,
+};
 pub use options::{AggregateOptions, AtlasPolicy, Method};
 pub use source::{InMemoryModels, ModelSource, SourceModel};
 pub use store::{AggregateEntry, AggregateManifest, AggregateStore, Garbage};

@@ -8,13 +8,14 @@
 //! `min + (i + 0.5, j + 0.5) * (box size / rect size)`, the inverse of the UV remapping; at scale
 //! 1 that is a source texel centre and bilinear sampling returns the texel unchanged.
 
-use std::sync::OnceLock;
+use std::sync::{Arc, OnceLock};
 
 use glam::{DVec2, Vec4};
 use horizon_mesh::model::{AlphaMode, InstancedMesh, Wrap};
 use image::{Rgba, RgbaImage};
 use rayon::prelude::*;
 
+use crate::cache::TextureCache;
 use crate::chart::Chart;
 use crate::pack::{Layout, PackedRect};
 use crate::AtlasError;
@@ -31,8 +32,8 @@ const FAR_TEXEL: f64 = 4_503_599_627_370_496.0;
 /// A decoded texture with the wrap modes it is sampled with.
 #[derive(Clone, Debug)]
 pub(crate) struct Source {
-    /// RGBA8, sRGB colour and linear alpha.
-    pub image: RgbaImage,
+    /// RGBA8, sRGB colour and linear alpha (shared through the [`TextureCache`]).
+    pub image: Arc<RgbaImage>,
     /// Wrap modes along U and V.
     pub wrap: [Wrap; 2],
 }
@@ -40,7 +41,10 @@ pub(crate) struct Source {
 /// Decodes every texture referenced by a material that some submesh uses; the others stay
 /// `None`. A texture that decodes to no pixels also stays `None` and its materials fall back to
 /// flat patches.
-pub(crate) fn decode_sources(mesh: &InstancedMesh) -> Result<Vec<Option<Source>>, AtlasError> {
+pub(crate) fn decode_sources(
+    mesh: &InstancedMesh,
+    cache: &TextureCache,
+) -> Result<Vec<Option<Source>>, AtlasError> {
     let mut used = vec![false; mesh.textures.len()];
     for sub in &mesh.submeshes {
         let tref = sub
@@ -61,8 +65,8 @@ pub(crate) fn decode_sources(mesh: &InstancedMesh) -> Result<Vec<Option<Source>>
             if !used {
                 return Ok(None);
             }
-            let image = tex
-                .decode()
+            let image = cache
+                .decode(tex)
                 .map_err(|source| AtlasError::Decode { texture, source })?;
             let nonempty = image.width() > 0 && image.height() > 0;
             Ok(nonempty.then_some(Source {
@@ -357,7 +361,7 @@ mod tests {
         image.put_pixel(0, 0, Rgba([10, 20, 30, 255]));
         image.put_pixel(1, 0, Rgba([200, 100, 50, 128]));
         let src = Source {
-            image,
+            image: image.into(),
             wrap: [Wrap::Repeat; 2],
         };
         let c = sample_bilinear(&src, DVec2::new(1.5, 0.5));

@@ -64,6 +64,7 @@
 //!   thousands of islands would want islands grouped into fewer charts first.
 
 mod bake;
+mod cache;
 mod chart;
 mod encode;
 mod pack;
@@ -74,6 +75,7 @@ use horizon_mesh::model::{
     AlphaMode, InstancedMesh, InvalidMesh, Material, Submesh, Texture, TextureRef, Wrap,
 };
 
+pub use cache::TextureCache;
 pub use pack::{pack_rects, Layout, LayoutError, PackedRect, MAXRECTS_MAX_CHARTS};
 
 /// Most source widths (or heights) of texels a chart keeps along one axis; a chart tiling more
@@ -87,10 +89,20 @@ pub fn build_atlas(
     mesh: &InstancedMesh,
     options: &AtlasOptions,
 ) -> Result<(InstancedMesh, AtlasReport), AtlasError> {
+    build_atlas_with(mesh, options, &TextureCache::new(0))
+}
+
+/// [`build_atlas`], decoding source textures through `cache` (which may already hold them,
+/// from earlier atlases of the same world).
+pub fn build_atlas_with(
+    mesh: &InstancedMesh,
+    options: &AtlasOptions,
+    cache: &TextureCache,
+) -> Result<(InstancedMesh, AtlasReport), AtlasError> {
     // Refuse broken input before touching any pixel.
     mesh.validate()?;
     // Decode every texture a used material references, once.
-    let sources = bake::decode_sources(mesh)?;
+    let sources = bake::decode_sources(mesh, cache)?;
     // Stage 1: chart the used texture regions and the flat-colour patches.
     let charting = chart::chart_mesh(mesh, &sources, options);
     // The one output material decides whether alpha must survive encoding.

@@ -4,7 +4,7 @@ mod common;
 
 use common::*;
 use glam::{Vec2, Vec3, Vec4};
-use horizon_atlas::{build_atlas, AtlasError, AtlasOptions};
+use horizon_atlas::{build_atlas, build_atlas_with, AtlasError, AtlasOptions, TextureCache};
 use horizon_mesh::model::{AlphaMode, InstancedMesh, Submesh, Texture, Wrap};
 use image::Rgba;
 
@@ -441,4 +441,55 @@ fn textured_material_without_uvs_is_its_mean_colour() {
     let (_, report, atlas) = atlased(&input, &AtlasOptions::default());
     assert_eq!(report.patches, 1);
     assert!(atlas.pixels().all(|p| *p == Rgba([188, 188, 188, 255])));
+}
+
+/// Textures two atlases share decode once: the second atlas finds them in the cache, the
+/// third mesh's different texture does not hit (equal size, other bytes), and an atlas built
+/// through a warm cache is the one built cold, byte for byte.
+#[test]
+fn a_texture_cache_changes_no_atlas() {
+    let textured = |seed: u64| {
+        mesh(
+            vec![quad(box_uvs(Vec2::ZERO, Vec2::ONE), Some(0))],
+            vec![material(Vec4::ONE, Some(0), AlphaMode::Opaque)],
+            vec![png_texture(&noise(64, 64, seed, false), Wrap::Repeat)],
+        )
+    };
+    let (a, b) = (textured(1), textured(2));
+    let cache = TextureCache::new(1 << 20);
+    let cold_a = build_atlas(&a, &AtlasOptions::default()).expect("atlas");
+    let cold_b = build_atlas(&b, &AtlasOptions::default()).expect("atlas");
+    let warm_a = build_atlas_with(&a, &AtlasOptions::default(), &cache).expect("atlas");
+    assert_eq!(cache.held_bytes(), 64 * 64 * 4);
+    let again_a = build_atlas_with(&a, &AtlasOptions::default(), &cache).expect("atlas");
+    assert_eq!(cache.held_bytes(), 64 * 64 * 4, "a hit adds nothing");
+    let warm_b = build_atlas_with(&b, &AtlasOptions::default(), &cache).expect("atlas");
+    assert_eq!(
+        cache.held_bytes(),
+        2 * 64 * 64 * 4,
+        "other bytes are another entry"
+    );
+    for (warm, cold) in [(&warm_a, &cold_a), (&again_a, &cold_a), (&warm_b, &cold_b)] {
+        assert_eq!(warm.0, cold.0);
+        assert_eq!(warm.1, cold.1);
+    }
+    assert_ne!(warm_a.0.textures[0].bytes, warm_b.0.textures[0].bytes);
+}
+
+/// The cache holds at most its budget, dropping the oldest images first; an image larger
+/// than the budget is decoded but not kept.
+#[test]
+fn a_texture_cache_keeps_to_its_budget() {
+    let tex = |seed: u64| png_texture(&noise(32, 32, seed, false), Wrap::Repeat);
+    let one = 32 * 32 * 4;
+    let cache = TextureCache::new(2 * one);
+    for seed in 0..5 {
+        let image = cache.decode(&tex(seed)).expect("decodes");
+        assert_eq!(image.dimensions(), (32, 32));
+        assert!(cache.held_bytes() <= 2 * one);
+    }
+    assert_eq!(cache.held_bytes(), 2 * one);
+    let none = TextureCache::new(one - 1);
+    none.decode(&tex(9)).expect("decodes");
+    assert_eq!(none.held_bytes(), 0);
 }
