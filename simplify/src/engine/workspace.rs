@@ -6,6 +6,9 @@
 //! queue's last stretch takes, at every step, the part whose next candidate costs least, and
 //! the result is the same as in one part, byte for byte, for any number of threads.
 
+use std::sync::atomic::AtomicU32;
+use std::sync::atomic::Ordering::Relaxed;
+
 use glam::Vec2;
 use horizon_mesh::{InstancedMesh, Submesh};
 use rayon::prelude::*;
@@ -202,48 +205,73 @@ impl Workspace {
     /// when it lost all its triangles and was dropped with its instances).
     pub(crate) fn assemble(&self, mesh: &InstancedMesh) -> (InstancedMesh, Vec<Option<usize>>) {
         let parts = &self.parts;
-        let mut out_subs: Vec<Option<Submesh>> = mesh.submeshes.iter().cloned().map(Some).collect();
-        let mut remap: Vec<Vec<u32>> = parts
+        // Each wedge belongs to one submesh, so the submeshes assemble in parallel, each
+        // numbering its own wedges (atomics only to share the table; no two threads touch
+        // one entry).
+        let remap: Vec<Vec<AtomicU32>> = parts
             .iter()
-            .map(|p| vec![DEAD; p.wedge_pos.len()])
+            .map(|p| {
+                (0..p.wedge_pos.len())
+                    .map(|_| AtomicU32::new(DEAD))
+                    .collect()
+            })
             .collect();
-        for (j, info) in parts[0].subs.iter().enumerate() {
-            let mut sub = Submesh {
-                material: mesh.submeshes[info.source].material,
-                ..Submesh::default()
-            };
-            let mut normals = Vec::new();
-            let mut uvs: Vec<Vec2> = Vec::new();
-            let mut colors = Vec::new();
-            let mut take = |p: usize, t: u32| {
-                let part = &parts[p];
-                if !part.alive(t) {
-                    return;
-                }
-                for &w in &part.tris[t as usize].w {
-                    let wi = w as usize;
-                    if remap[p][wi] == DEAD {
-                        remap[p][wi] = sub.positions.len() as u32;
-                        let v = part.wedge_pos[wi] as usize;
-                        sub.positions.push(part.verts[v].pos.as_vec3());
-                        normals.push(part.normal[wi]);
-                        uvs.push(part.uv[wi]);
-                        colors.push(part.color[wi]);
+        let built: Vec<(usize, Submesh)> = parts[0]
+            .subs
+            .par_iter()
+            .enumerate()
+            .map(|(j, info)| {
+                let mut sub = Submesh {
+                    material: mesh.submeshes[info.source].material,
+                    ..Submesh::default()
+                };
+                let mut normals = Vec::new();
+                let mut uvs: Vec<Vec2> = Vec::new();
+                let mut colors = Vec::new();
+                let mut take = |p: usize, t: u32| {
+                    let part = &parts[p];
+                    if !part.alive(t) {
+                        return;
                     }
-                    sub.indices.push(remap[p][wi]);
+                    for &w in &part.tris[t as usize].w {
+                        let wi = w as usize;
+                        let mut id = remap[p][wi].load(Relaxed);
+                        if id == DEAD {
+                            id = sub.positions.len() as u32;
+                            remap[p][wi].store(id, Relaxed);
+                            let v = part.wedge_pos[wi] as usize;
+                            sub.positions.push(part.verts[v].pos.as_vec3());
+                            normals.push(part.normal[wi]);
+                            uvs.push(part.uv[wi]);
+                            colors.push(part.color[wi]);
+                        }
+                        sub.indices.push(id);
+                    }
+                };
+                if self.layout.is_empty() {
+                    (info.tri_base..info.tri_end).for_each(|t| take(0, t));
+                } else {
+                    self.layout[j]
+                        .iter()
+                        .for_each(|&(p, t)| take(p as usize, t));
                 }
-            };
-            if self.layout.is_empty() {
-                (info.tri_base..info.tri_end).for_each(|t| take(0, t));
-            } else {
-                self.layout[j]
-                    .iter()
-                    .for_each(|&(p, t)| take(p as usize, t));
+                sub.normals = info.has_normals.then_some(normals);
+                sub.uvs = info.has_uvs.then_some(uvs);
+                sub.colors = info.has_colors.then_some(colors);
+                (info.source, sub)
+            })
+            .collect();
+        // Submeshes that were not loaded (no instances, or no triangles) stay as they are.
+        let mut out_subs: Vec<Option<Submesh>> = vec![None; mesh.submeshes.len()];
+        let mut loaded = vec![false; mesh.submeshes.len()];
+        for (source, sub) in built {
+            loaded[source] = true;
+            out_subs[source] = (!sub.indices.is_empty()).then_some(sub);
+        }
+        for (s, sub) in mesh.submeshes.iter().enumerate() {
+            if !loaded[s] {
+                out_subs[s] = Some(sub.clone());
             }
-            sub.normals = info.has_normals.then_some(normals);
-            sub.uvs = info.has_uvs.then_some(uvs);
-            sub.colors = info.has_colors.then_some(colors);
-            out_subs[info.source] = (!sub.indices.is_empty()).then_some(sub);
         }
         let mut index = vec![usize::MAX; out_subs.len()];
         let mut submeshes = Vec::new();
