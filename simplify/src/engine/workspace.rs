@@ -172,7 +172,7 @@ impl Workspace {
         // A mesh smaller than two parts' worth fits in cache as it is: it stays in one queue.
         let large = self.positions >= 2 * self.sweep.part_vertices;
         let queued = if options.max_error.is_none() && self.sweep.share > 0.0 && large {
-            let queued = sweep::sweep(&mut self.parts, self.sweep.share, &mut stats, target);
+            let queued = sweep::sweep(&mut self.parts, self.sweep, &mut stats, target);
             self.swept = match queued {
                 None => sweep::Outcome::ReachedTarget,
                 Some(true) => sweep::Outcome::Swept,
