@@ -37,6 +37,10 @@ pub use workspace::Workspace;
 
 const DEAD: u32 = u32::MAX;
 
+/// Fewest items (vertices, triangles) a stage hands to the thread pool: entering it from
+/// outside costs a wake-up, more than a small mesh's whole stage.
+const PARALLEL_MIN: usize = 1 << 14;
+
 /// One part of a [`Workspace`]: the pieces of the mesh it was given, loaded into one set of
 /// arrays. Every buffer keeps its capacity between simplifications.
 #[derive(Debug, Default)]
@@ -478,49 +482,64 @@ impl Part {
         for info in &self.subs {
             let tris = &self.tris[info.tri_base as usize..info.tri_end as usize];
             let verts = &self.verts;
-            let normals: Vec<DVec3> = tris
-                .par_iter()
-                .with_min_len(4096)
-                .map(|t| {
-                    let [a, b, c] = t.p.map(|v| verts[v as usize].pos);
-                    (b - a).cross(c - a)
-                })
-                .collect();
+            let normal = |t: &Tri| {
+                let [a, b, c] = t.p.map(|v| verts[v as usize].pos);
+                (b - a).cross(c - a)
+            };
+            let normals: Vec<DVec3> = if tris.len() < PARALLEL_MIN {
+                tris.iter().map(normal).collect()
+            } else {
+                tris.par_iter().with_min_len(4096).map(normal).collect()
+            };
             weights.extend(sets[info.source].face_weights(&normals));
         }
         // Face quadrics, vertex by vertex (in parallel), each summing its triangles' planes in
         // triangle order.
         let pos: Vec<DVec3> = self.verts.iter().map(|v| v.pos).collect();
         let (tris, adj) = (&self.tris, &self.adj);
-        self.verts
-            .par_iter_mut()
-            .with_min_len(4096)
-            .for_each(|vert| {
-                let start = vert.adj_start as usize;
-                for &t in &adj[start..start + vert.adj_len as usize] {
-                    let [a, b, c] = tris[t as usize].p.map(|v| pos[v as usize]);
-                    let n2 = (b - a).cross(c - a);
-                    let len = n2.length();
-                    if len == 0.0 {
-                        continue;
-                    }
-                    let n = n2 / len;
-                    let area = 0.5 * len;
-                    let (w_plane, w_area) = weights[t as usize];
-                    vert.quadric += Quadric::from_plane(n, -n.dot(a), area * w_plane)
-                        .with_weight(area * w_area);
+        let accumulate = |vert: &mut Vert| {
+            let start = vert.adj_start as usize;
+            for &t in &adj[start..start + vert.adj_len as usize] {
+                let [a, b, c] = tris[t as usize].p.map(|v| pos[v as usize]);
+                let n2 = (b - a).cross(c - a);
+                let len = n2.length();
+                if len == 0.0 {
+                    continue;
                 }
-            });
+                let n = n2 / len;
+                let area = 0.5 * len;
+                let (w_plane, w_area) = weights[t as usize];
+                vert.quadric +=
+                    Quadric::from_plane(n, -n.dot(a), area * w_plane).with_weight(area * w_area);
+            }
+        };
+        let small = self.verts.len() < PARALLEL_MIN;
+        if small {
+            self.verts.iter_mut().for_each(accumulate);
+        } else {
+            self.verts
+                .par_iter_mut()
+                .with_min_len(4096)
+                .for_each(accumulate);
+        }
         // Boundary, seam and non-manifold edges, found vertex by vertex (in parallel, then
         // applied in vertex order).
-        let found: Vec<EdgeKinds> = (0..self.verts.len() as u32)
-            .into_par_iter()
-            .with_min_len(4096)
-            .fold(EdgeKinds::default, |mut found, v| {
+        let found: Vec<EdgeKinds> = if small {
+            let mut found = EdgeKinds::default();
+            for v in 0..self.verts.len() as u32 {
                 self.classify_edges(v, options, &mut found);
-                found
-            })
-            .collect();
+            }
+            vec![found]
+        } else {
+            (0..self.verts.len() as u32)
+                .into_par_iter()
+                .with_min_len(4096)
+                .fold(EdgeKinds::default, |mut found, v| {
+                    self.classify_edges(v, options, &mut found);
+                    found
+                })
+                .collect()
+        };
         let mut constraints: Vec<(u32, u32, u32, f64)> = Vec::new();
         for found in found {
             for v in found.boundary {

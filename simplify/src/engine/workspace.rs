@@ -13,7 +13,7 @@ use glam::Vec2;
 use horizon_mesh::{InstancedMesh, Submesh};
 use rayon::prelude::*;
 
-use super::{sweep, Only, Part, RunStats, Step, DEAD};
+use super::{sweep, Only, Part, RunStats, Step, DEAD, PARALLEL_MIN};
 use crate::options::SimplifyOptions;
 use crate::weights::InstanceSet;
 use crate::weld::Weld;
@@ -68,19 +68,24 @@ impl Workspace {
     /// many pieces into one part per thread, and loads the parts. Returns the expanded
     /// triangle count loaded.
     pub(crate) fn load(&mut self, mesh: &InstancedMesh, sets: &[InstanceSet]) -> u64 {
-        let welds: Vec<Option<Weld>> = mesh
-            .submeshes
-            .par_iter()
-            .zip(sets)
-            .map(|(sub, set)| {
-                (set.count() > 0 && !sub.indices.is_empty()).then(|| crate::weld::weld(sub))
-            })
-            .collect();
+        let weld = |(sub, set): (&Submesh, &InstanceSet)| {
+            (set.count() > 0 && !sub.indices.is_empty()).then(|| crate::weld::weld(sub))
+        };
+        let vertices: usize = mesh.submeshes.iter().map(|s| s.positions.len()).sum();
+        let welds: Vec<Option<Weld>> = if vertices < PARALLEL_MIN {
+            mesh.submeshes.iter().zip(sets).map(weld).collect()
+        } else {
+            mesh.submeshes.par_iter().zip(sets).map(weld).collect()
+        };
         let positions: usize = welds.iter().flatten().map(|w| w.positions as usize).sum();
         self.positions = positions;
-        let mut count = rayon::current_num_threads()
-            .min(positions / self.sweep.part_vertices.max(1))
-            .min(u8::MAX as usize);
+        // Asked only of a large mesh: the first call starts the thread pool.
+        let most = positions / self.sweep.part_vertices.max(1);
+        let mut count = if most < 2 {
+            1
+        } else {
+            rayon::current_num_threads().min(most).min(u8::MAX as usize)
+        };
         self.layout.clear();
         let roots: Vec<Vec<u32>> = if count < 2 || self.sweep.share <= 0.0 {
             Vec::new()
@@ -145,9 +150,12 @@ impl Workspace {
 
     /// Stage 2: quadrics, part by part in parallel.
     pub(crate) fn build_quadrics(&mut self, sets: &[InstanceSet], options: &SimplifyOptions) {
-        self.parts
-            .par_iter_mut()
-            .for_each(|part| part.build_quadrics(sets, options));
+        match &mut self.parts[..] {
+            [one] => one.build_quadrics(sets, options),
+            parts => parts
+                .par_iter_mut()
+                .for_each(|part| part.build_quadrics(sets, options)),
+        }
     }
 
     /// Stage 3: collapses in one global order of cost until the expanded count reaches
@@ -216,51 +224,52 @@ impl Workspace {
                     .collect()
             })
             .collect();
-        let built: Vec<(usize, Submesh)> = parts[0]
-            .subs
-            .par_iter()
-            .enumerate()
-            .map(|(j, info)| {
-                let mut sub = Submesh {
-                    material: mesh.submeshes[info.source].material,
-                    ..Submesh::default()
-                };
-                let mut normals = Vec::new();
-                let mut uvs: Vec<Vec2> = Vec::new();
-                let mut colors = Vec::new();
-                let mut take = |p: usize, t: u32| {
-                    let part = &parts[p];
-                    if !part.alive(t) {
-                        return;
-                    }
-                    for &w in &part.tris[t as usize].w {
-                        let wi = w as usize;
-                        let mut id = remap[p][wi].load(Relaxed);
-                        if id == DEAD {
-                            id = sub.positions.len() as u32;
-                            remap[p][wi].store(id, Relaxed);
-                            let v = part.wedge_pos[wi] as usize;
-                            sub.positions.push(part.verts[v].pos.as_vec3());
-                            normals.push(part.normal[wi]);
-                            uvs.push(part.uv[wi]);
-                            colors.push(part.color[wi]);
-                        }
-                        sub.indices.push(id);
-                    }
-                };
-                if self.layout.is_empty() {
-                    (info.tri_base..info.tri_end).for_each(|t| take(0, t));
-                } else {
-                    self.layout[j]
-                        .iter()
-                        .for_each(|&(p, t)| take(p as usize, t));
+        let build = |(j, info): (usize, &super::SubInfo)| {
+            let mut sub = Submesh {
+                material: mesh.submeshes[info.source].material,
+                ..Submesh::default()
+            };
+            let mut normals = Vec::new();
+            let mut uvs: Vec<Vec2> = Vec::new();
+            let mut colors = Vec::new();
+            let mut take = |p: usize, t: u32| {
+                let part = &parts[p];
+                if !part.alive(t) {
+                    return;
                 }
-                sub.normals = info.has_normals.then_some(normals);
-                sub.uvs = info.has_uvs.then_some(uvs);
-                sub.colors = info.has_colors.then_some(colors);
-                (info.source, sub)
-            })
-            .collect();
+                for &w in &part.tris[t as usize].w {
+                    let wi = w as usize;
+                    let mut id = remap[p][wi].load(Relaxed);
+                    if id == DEAD {
+                        id = sub.positions.len() as u32;
+                        remap[p][wi].store(id, Relaxed);
+                        let v = part.wedge_pos[wi] as usize;
+                        sub.positions.push(part.verts[v].pos.as_vec3());
+                        normals.push(part.normal[wi]);
+                        uvs.push(part.uv[wi]);
+                        colors.push(part.color[wi]);
+                    }
+                    sub.indices.push(id);
+                }
+            };
+            if self.layout.is_empty() {
+                (info.tri_base..info.tri_end).for_each(|t| take(0, t));
+            } else {
+                self.layout[j]
+                    .iter()
+                    .for_each(|&(p, t)| take(p as usize, t));
+            }
+            sub.normals = info.has_normals.then_some(normals);
+            sub.uvs = info.has_uvs.then_some(uvs);
+            sub.colors = info.has_colors.then_some(colors);
+            (info.source, sub)
+        };
+        let wedges: usize = parts.iter().map(|p| p.wedge_pos.len()).sum();
+        let built: Vec<(usize, Submesh)> = if wedges < PARALLEL_MIN {
+            parts[0].subs.iter().enumerate().map(build).collect()
+        } else {
+            parts[0].subs.par_iter().enumerate().map(build).collect()
+        };
         // Submeshes that were not loaded (no instances, or no triangles) stay as they are.
         let mut out_subs: Vec<Option<Submesh>> = vec![None; mesh.submeshes.len()];
         let mut loaded = vec![false; mesh.submeshes.len()];
@@ -356,7 +365,10 @@ fn run_queue(
     let max_cost_error = options.max_error.unwrap_or(f64::INFINITY);
     'rounds: while stats.expanded > target {
         if !std::mem::take(&mut queued) {
-            parts.par_iter_mut().for_each(Part::seed_heap);
+            match &mut *parts {
+                [one] => one.seed_heap(),
+                parts => parts.par_iter_mut().for_each(Part::seed_heap),
+            }
         }
         let before = stats.collapses;
         while stats.expanded > target {
