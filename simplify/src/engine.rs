@@ -147,12 +147,21 @@ struct SubInfo {
 }
 
 /// A candidate collapse in the global queue, keyed by its cost's bits.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 struct Candidate {
     p: u32,
     q: u32,
     stamp_p: u32,
     stamp_q: u32,
+}
+
+impl Candidate {
+    /// Whether neither endpoint changed since the candidate was queued, by the endpoints'
+    /// `stamp`s (a free test, so that a queue can be searched while the stamps are lent).
+    #[inline]
+    fn is_current(&self, stamp: &[u32]) -> bool {
+        stamp[self.p as usize] == self.stamp_p && stamp[self.q as usize] == self.stamp_q
+    }
 }
 
 /// Most wedges a removed corner vertex may carry.
@@ -405,12 +414,9 @@ impl Part {
                 .push(sub.colors.as_ref().map_or(Vec4::ONE, |c| c[i]));
         }
         for t in sub.indices.chunks_exact(3) {
-            let ids = [t[0], t[1], t[2]].map(|i| weld.ids[i as usize]);
-            // A triangle with a repeated position is a point or a segment: it draws nothing
-            // and would only confuse the topology, so it is dropped (the count goes down).
-            if ids[0] == ids[1] || ids[1] == ids[2] || ids[0] == ids[2] || !mine(ids[0]) {
+            let Some(ids) = weld.triangle(t).filter(|ids| mine(ids[0])) else {
                 continue;
-            }
+            };
             let w = [t[0], t[1], t[2]].map(|i| wedge_of[i as usize]);
             let p = ids.map(|id| vert_of[id as usize]);
             let [a, b, c] = p.map(|v| self.verts[v as usize].pos);
@@ -806,7 +812,7 @@ impl Part {
     /// Whether candidate `c` is current: neither endpoint changed since it was queued.
     #[inline]
     fn is_current(&self, c: &Candidate) -> bool {
-        self.stamp[c.p as usize] == c.stamp_p && self.stamp[c.q as usize] == c.stamp_q
+        c.is_current(&self.stamp)
     }
 
     /// One current candidate off a queue: plan it, check it, collapse it. After a collapse

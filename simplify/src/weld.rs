@@ -16,6 +16,16 @@ pub(crate) struct Weld {
     pub positions: u32,
 }
 
+impl Weld {
+    /// The positions of triangle `t` (three vertex indices), or `None` when two of them are
+    /// the same: such a triangle is a point or a segment, draws nothing and would only
+    /// confuse the topology, so the engine drops it (the count goes down).
+    pub fn triangle(&self, t: &[u32]) -> Option<[u32; 3]> {
+        let [a, b, c] = [t[0], t[1], t[2]].map(|i| self.ids[i as usize]);
+        (a != b && b != c && a != c).then_some([a, b, c])
+    }
+}
+
 /// Numbers the vertices of `sub` by position.
 pub(crate) fn weld(sub: &horizon_mesh::Submesh) -> Weld {
     let mut welder = Welder::with_capacity(sub.positions.len());

@@ -191,9 +191,7 @@ impl Part {
     ) -> bool {
         loop {
             let stamp = &self.stamp;
-            let Some((_, c)) = queue.pop_valid_at_most(theta, |c| {
-                stamp[c.p as usize] == c.stamp_p && stamp[c.q as usize] == c.stamp_q
-            }) else {
+            let Some((_, c)) = queue.pop_valid_at_most(theta, |c| c.is_current(stamp)) else {
                 return true;
             };
             let before = stats.expanded;
@@ -326,6 +324,15 @@ fn run_to(
     !stop.into_inner()
 }
 
+/// Candidates queued in the chosen groups (current or stale).
+fn queued(lanes: &[Lane], which: Groups) -> usize {
+    lanes
+        .iter()
+        .flat_map(|l| which.of(&l.queues))
+        .map(RadixHeap::len)
+        .sum()
+}
+
 /// Expanded triangles the lanes removed so far.
 fn removed(lanes: &[Lane]) -> u64 {
     lanes.iter().map(|l| Lane::START - l.stats.expanded).sum()
@@ -348,14 +355,8 @@ fn pilot_then_main(
     if groups < stride * settings.min_pilots {
         return true;
     }
-    let queued = |lanes: &[Lane], which: Groups| -> f64 {
-        lanes
-            .iter()
-            .flat_map(|l| which.of(&l.queues))
-            .map(RadixHeap::len)
-            .sum::<usize>() as f64
-    };
-    let scale = queued(lanes, Groups::All) / queued(lanes, Groups::Pilot(stride)).max(1.0);
+    let scale =
+        queued(lanes, Groups::All) as f64 / (queued(lanes, Groups::Pilot(stride)) as f64).max(1.0);
     let aim = settings.main_share * first as f64;
     let mut key = None;
     for _ in 0..MAX_SWEEPS {
@@ -379,11 +380,7 @@ fn pilot_then_main(
 /// at two per collapse times the submesh's instances (an estimate: some candidates fail their
 /// checks, and collapses queue new ones). `None` when nothing is queued.
 fn threshold(parts: &[Part], lanes: &[Lane], which: Groups, share: f64) -> Option<u64> {
-    let total: usize = lanes
-        .iter()
-        .flat_map(|l| which.of(&l.queues))
-        .map(RadixHeap::len)
-        .sum();
+    let total = queued(lanes, which);
     let stride = total.div_ceil(SAMPLE).max(1);
     let mut sample: Vec<(u64, u64)> = Vec::with_capacity(total / stride + lanes.len());
     for (part, lane) in parts.iter().zip(lanes) {

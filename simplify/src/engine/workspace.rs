@@ -134,11 +134,11 @@ impl Workspace {
                 *n = self.parts[p].subs[j].tri_base;
             }
             let mut tris = Vec::new();
-            for t in mesh.submeshes[s].indices.chunks_exact(3) {
-                let ids = [t[0], t[1], t[2]].map(|i| weld.ids[i as usize]);
-                if ids[0] == ids[1] || ids[1] == ids[2] || ids[0] == ids[2] {
-                    continue;
-                }
+            for ids in mesh.submeshes[s]
+                .indices
+                .chunks_exact(3)
+                .filter_map(|t| weld.triangle(t))
+            {
                 let p = owners[s][ids[0] as usize] as usize;
                 tris.push((p as u32, next[p]));
                 next[p] += 1;
@@ -340,12 +340,9 @@ fn owners(roots: &[Vec<u32>], count: usize) -> Vec<Vec<u8>> {
 /// For every position of `sub`, the first position of its piece.
 fn piece_roots(sub: &Submesh, weld: &Weld) -> Vec<u32> {
     let mut parent: Vec<u32> = (0..weld.positions).collect();
-    for t in sub.indices.chunks_exact(3) {
-        let [a, b, c] = [t[0], t[1], t[2]].map(|i| weld.ids[i as usize]);
-        if a != b && b != c && a != c {
-            sweep::union(&mut parent, a, b);
-            sweep::union(&mut parent, a, c);
-        }
+    for [a, b, c] in sub.indices.chunks_exact(3).filter_map(|t| weld.triangle(t)) {
+        sweep::union(&mut parent, a, b);
+        sweep::union(&mut parent, a, c);
     }
     (0..weld.positions)
         .map(|id| sweep::find(&mut parent, id))
@@ -376,9 +373,7 @@ fn run_queue(
             let mut best: Option<(u64, usize)> = None;
             for (i, part) in parts.iter_mut().enumerate() {
                 let stamp = &part.stamp;
-                let key = part.heap.peek_valid(|c| {
-                    stamp[c.p as usize] == c.stamp_p && stamp[c.q as usize] == c.stamp_q
-                });
+                let key = part.heap.peek_valid(|c| c.is_current(stamp));
                 if let Some(key) = key {
                     if best.is_none_or(|(least, _)| key < least) {
                         best = Some((key, i));
