@@ -119,6 +119,12 @@ pub(crate) fn bake_atlas(
 }
 
 /// One chart's rectangle, row by row: resampled, multiplied, alpha resolved, encoded.
+///
+/// The sample grid is separable: a texel's box of `kx x ky` bilinear points takes its columns
+/// from `i` alone and its rows from `j` alone. So every column tap (two wrapped texel indices
+/// and a weight) and every row tap is computed once per chart rather than once per texel, with
+/// the same arithmetic as a bilinear sample of the whole point (`sample_bilinear`, the tests'
+/// reference): the result is the same bit for bit.
 fn bake_interior(
     chart: &Chart,
     rect: &PackedRect,
@@ -130,28 +136,72 @@ fn bake_interior(
     let samples = step.ceil().clamp(DVec2::ONE, DVec2::splat(MAX_SUPERSAMPLE));
     let (kx, ky) = (samples.x as u32, samples.y as u32);
     let weight = 1.0 / (kx * ky) as f32;
-    let mut out = Vec::with_capacity(rect.width as usize * rect.height as usize);
-    for j in 0..rect.height {
-        for i in 0..rect.width {
+    let texels = rect.width as usize * rect.height as usize;
+    let Some(src) = source else {
+        let flat = encode_texel(Vec4::ONE * chart.factor, chart.alpha, opaque);
+        return vec![flat; texels];
+    };
+    let (w, h) = src.image.dimensions();
+    let columns = taps(chart.min.x, step.x, rect.width, kx, w, src.wrap[0]);
+    let rows = taps(chart.min.y, step.y, rect.height, ky, h, src.wrap[1]);
+    let pixels: &[u8] = src.image.as_raw();
+    let texel = |x: u32, y: u32| {
+        let k = (y as usize * w as usize + x as usize) * 4;
+        texel_linear(&Rgba([
+            pixels[k],
+            pixels[k + 1],
+            pixels[k + 2],
+            pixels[k + 3],
+        ]))
+    };
+    let mut out = Vec::with_capacity(texels);
+    for row in rows.chunks_exact(ky as usize) {
+        for column in columns.chunks_exact(kx as usize) {
             let mut colour = Vec4::ZERO;
-            match source {
-                Some(src) => {
-                    for b in 0..ky {
-                        for a in 0..kx {
-                            let sub = DVec2::new(
-                                f64::from(i) + (f64::from(a) + 0.5) / f64::from(kx),
-                                f64::from(j) + (f64::from(b) + 0.5) / f64::from(ky),
-                            );
-                            colour += sample_bilinear(src, chart.min + sub * step);
-                        }
-                    }
-                    if kx * ky > 1 {
-                        colour *= weight;
-                    }
+            for y in row {
+                for x in column {
+                    let top = texel(x.index[0], y.index[0]) * (1.0 - x.t)
+                        + texel(x.index[1], y.index[0]) * x.t;
+                    let bottom = texel(x.index[0], y.index[1]) * (1.0 - x.t)
+                        + texel(x.index[1], y.index[1]) * x.t;
+                    colour += top * (1.0 - y.t) + bottom * y.t;
                 }
-                None => colour = Vec4::ONE,
+            }
+            if kx * ky > 1 {
+                colour *= weight;
             }
             out.push(encode_texel(colour * chart.factor, chart.alpha, opaque));
+        }
+    }
+    out
+}
+
+/// One axis of a bilinear sample: the two source texels it blends and the second's weight.
+#[derive(Clone, Copy, Debug)]
+struct Tap {
+    index: [u32; 2],
+    t: f32,
+}
+
+/// The taps along one axis of a rectangle `size` texels long, `k` samples per texel: texel
+/// `i`, sample `a` sits at `min + (i + (a + 0.5) / k) * step` in source texel space (the
+/// per-axis half of a bilinear sample, computed the same way).
+fn taps(min: f64, step: f64, size: u32, k: u32, n: u32, wrap: Wrap) -> Vec<Tap> {
+    let mut out = Vec::with_capacity(size as usize * k as usize);
+    for i in 0..size {
+        for a in 0..k {
+            let sub = f64::from(i) + (f64::from(a) + 0.5) / f64::from(k);
+            let q = (min + sub * step) - 0.5;
+            // The clamp of `sample_bilinear` (glam's, which also sends NaN to the low end).
+            let f = floor(q);
+            let f = if f > -FAR_TEXEL { f } else { -FAR_TEXEL };
+            let f = if f < FAR_TEXEL { f } else { FAR_TEXEL };
+            let t = (q - f) as f32;
+            let i0 = f as i64;
+            out.push(Tap {
+                index: [wrap_index(i0, n, wrap), wrap_index(i0 + 1, n, wrap)],
+                t,
+            });
         }
     }
     out
@@ -181,8 +231,10 @@ fn encode_texel(colour: Vec4, alpha: AlphaMode, opaque: bool) -> Rgba<u8> {
 }
 
 /// Bilinear sample of `src` at `p` in texel space (texel centres at `i + 0.5`), honouring the
-/// wrap modes; returns linear RGB and alpha.
-pub(crate) fn sample_bilinear(src: &Source, p: DVec2) -> Vec4 {
+/// wrap modes; returns linear RGB and alpha. The bake does the same per axis ([`taps`]); this
+/// whole-point form is the reference its tests hold it to.
+#[cfg(test)]
+fn sample_bilinear(src: &Source, p: DVec2) -> Vec4 {
     let (w, h) = src.image.dimensions();
     let q = p - DVec2::splat(0.5);
     // Far tiles fold like near ones; clamping first keeps `x0 + 1` from overflowing i64.
@@ -375,5 +427,69 @@ mod tests {
             encode_texel(c, AlphaMode::Blend, false),
             Rgba([200, 100, 50, 128])
         );
+    }
+
+    /// The bake before its taps were shared: every sample through [`sample_bilinear`].
+    fn bake_reference(chart: &Chart, rect: &PackedRect, src: &Source) -> Vec<Rgba<u8>> {
+        let step =
+            (chart.max - chart.min) / DVec2::new(f64::from(rect.width), f64::from(rect.height));
+        let samples = step.ceil().clamp(DVec2::ONE, DVec2::splat(MAX_SUPERSAMPLE));
+        let (kx, ky) = (samples.x as u32, samples.y as u32);
+        let mut out = Vec::new();
+        for j in 0..rect.height {
+            for i in 0..rect.width {
+                let mut colour = Vec4::ZERO;
+                for b in 0..ky {
+                    for a in 0..kx {
+                        let sub = DVec2::new(
+                            f64::from(i) + (f64::from(a) + 0.5) / f64::from(kx),
+                            f64::from(j) + (f64::from(b) + 0.5) / f64::from(ky),
+                        );
+                        colour += sample_bilinear(src, chart.min + sub * step);
+                    }
+                }
+                if kx * ky > 1 {
+                    colour *= 1.0 / (kx * ky) as f32;
+                }
+                out.push(encode_texel(colour * chart.factor, chart.alpha, false));
+            }
+        }
+        out
+    }
+
+    proptest::proptest! {
+        #[test]
+        fn shared_taps_bake_what_every_sample_alone_bakes(
+            w in 1u32..9, h in 1u32..9,
+            seed in proptest::prelude::any::<u64>(),
+            min in (-40i32..40, -40i32..40),
+            size in (1i32..60, 1i32..60),
+            rect in (1u32..24, 1u32..24),
+            wraps in (0usize..3, 0usize..3),
+        ) {
+            // Random texels, a random box anywhere (wrapping included), shrunk or enlarged.
+            let mut state = seed | 1;
+            let image = RgbaImage::from_fn(w, h, |_, _| {
+                state ^= state << 13;
+                state ^= state >> 7;
+                state ^= state << 17;
+                let b = state.to_le_bytes();
+                Rgba([b[0], b[1], b[2], b[3]])
+            });
+            let modes = [Wrap::Repeat, Wrap::MirroredRepeat, Wrap::ClampToEdge];
+            let src = Source { image: image.into(), wrap: [modes[wraps.0], modes[wraps.1]] };
+            let chart = Chart {
+                texture: Some(0),
+                material: None,
+                factor: Vec4::new(0.9, 0.8, 1.0, 0.7),
+                alpha: AlphaMode::Blend,
+                min: DVec2::new(f64::from(min.0), f64::from(min.1)),
+                max: DVec2::new(f64::from(min.0 + size.0), f64::from(min.1 + size.1)),
+                cap: DVec2::splat(1e9),
+            };
+            let rect = PackedRect { x: 0, y: 0, width: rect.0, height: rect.1 };
+            let fast = bake_interior(&chart, &rect, &[Some(src.clone())], false);
+            proptest::prop_assert_eq!(fast, bake_reference(&chart, &rect, &src));
+        }
     }
 }
