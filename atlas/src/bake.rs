@@ -142,11 +142,20 @@ fn bake_interior(
         return vec![flat; texels];
     };
     let (w, h) = src.image.dimensions();
-    let columns = taps(chart.min.x, step.x, rect.width, kx, w, src.wrap[0]);
-    let rows = taps(chart.min.y, step.y, rect.height, ky, h, src.wrap[1]);
+    // Byte offsets into the RGBA8 pixels: a column's texel times 4, a row's times the row.
+    let columns = taps(chart.min.x, step.x, rect.width, kx, w, src.wrap[0], 4);
+    let rows = taps(
+        chart.min.y,
+        step.y,
+        rect.height,
+        ky,
+        h,
+        src.wrap[1],
+        w as usize * 4,
+    );
     let pixels: &[u8] = src.image.as_raw();
-    let texel = |x: u32, y: u32| {
-        let k = (y as usize * w as usize + x as usize) * 4;
+    let texel = |x: usize, y: usize| {
+        let k = x + y;
         texel_linear(&Rgba([
             pixels[k],
             pixels[k + 1],
@@ -160,10 +169,9 @@ fn bake_interior(
             let mut colour = Vec4::ZERO;
             for y in row {
                 for x in column {
-                    let top = texel(x.index[0], y.index[0]) * (1.0 - x.t)
-                        + texel(x.index[1], y.index[0]) * x.t;
-                    let bottom = texel(x.index[0], y.index[1]) * (1.0 - x.t)
-                        + texel(x.index[1], y.index[1]) * x.t;
+                    let top = texel(x.at[0], y.at[0]) * (1.0 - x.t) + texel(x.at[1], y.at[0]) * x.t;
+                    let bottom =
+                        texel(x.at[0], y.at[1]) * (1.0 - x.t) + texel(x.at[1], y.at[1]) * x.t;
                     colour += top * (1.0 - y.t) + bottom * y.t;
                 }
             }
@@ -176,17 +184,18 @@ fn bake_interior(
     out
 }
 
-/// One axis of a bilinear sample: the two source texels it blends and the second's weight.
+/// One axis of a bilinear sample: where the two source texels it blends start (their index
+/// times the axis' stride in bytes) and the second's weight.
 #[derive(Clone, Copy, Debug)]
 struct Tap {
-    index: [u32; 2],
+    at: [usize; 2],
     t: f32,
 }
 
 /// The taps along one axis of a rectangle `size` texels long, `k` samples per texel: texel
 /// `i`, sample `a` sits at `min + (i + (a + 0.5) / k) * step` in source texel space (the
 /// per-axis half of a bilinear sample, computed the same way).
-fn taps(min: f64, step: f64, size: u32, k: u32, n: u32, wrap: Wrap) -> Vec<Tap> {
+fn taps(min: f64, step: f64, size: u32, k: u32, n: u32, wrap: Wrap, stride: usize) -> Vec<Tap> {
     let mut out = Vec::with_capacity(size as usize * k as usize);
     for i in 0..size {
         for a in 0..k {
@@ -199,7 +208,8 @@ fn taps(min: f64, step: f64, size: u32, k: u32, n: u32, wrap: Wrap) -> Vec<Tap> 
             let t = (q - f) as f32;
             let i0 = f as i64;
             out.push(Tap {
-                index: [wrap_index(i0, n, wrap), wrap_index(i0 + 1, n, wrap)],
+                at: [wrap_index(i0, n, wrap), wrap_index(i0 + 1, n, wrap)]
+                    .map(|i| i as usize * stride),
                 t,
             });
         }
@@ -311,8 +321,14 @@ fn texel_linear(px: &Rgba<u8>) -> Vec4 {
         lut[px[0] as usize],
         lut[px[1] as usize],
         lut[px[2] as usize],
-        f32::from(px[3]) / 255.0,
+        alpha_table()[px[3] as usize],
     )
+}
+
+/// 8-bit alpha to [0, 1] (`a / 255`, looked up rather than divided in the bake's inner loop).
+fn alpha_table() -> &'static [f32; 256] {
+    static TABLE: OnceLock<[f32; 256]> = OnceLock::new();
+    TABLE.get_or_init(|| std::array::from_fn(|a| a as f32 / 255.0))
 }
 
 /// sRGB 8-bit code to linear light (IEC 61966-2-1).
@@ -333,10 +349,35 @@ fn srgb_to_linear_table() -> &'static [f32; 256] {
 
 /// Linear light to the nearest sRGB 8-bit code.
 pub(crate) fn linear_to_srgb8(x: f32) -> u8 {
-    // The code whose sRGB value rounds to x: the number of decision points below x, where the
-    // decision point between codes v and v + 1 is the linear value of sRGB (v + 0.5) / 255.
+    // The code whose sRGB value rounds to x: the number of decision points at or below x,
+    // where the decision point between codes v and v + 1 is the linear value of sRGB
+    // (v + 0.5) / 255. A table over 4,096 equal steps of [0, 1] gives that count at the step's
+    // lower end; the few decision points inside the step are then counted one by one.
     let thresholds = srgb_thresholds();
-    thresholds.partition_point(|&t| t <= x) as u8
+    let start = srgb_code_floor_table();
+    // NaN and negatives go to step 0 (as `usize` saturates), beyond 1 to the last.
+    let step = ((x * SRGB_STEPS as f32) as usize).min(SRGB_STEPS - 1);
+    let mut code = usize::from(start[step]);
+    while code < thresholds.len() && thresholds[code] <= x {
+        code += 1;
+    }
+    code as u8
+}
+
+/// Steps of [`srgb_code_floor_table`].
+const SRGB_STEPS: usize = 4096;
+
+/// For step `s`, the count of decision points at or below `s / SRGB_STEPS`, a lower bound of
+/// the code of every value in the step.
+fn srgb_code_floor_table() -> &'static [u8; SRGB_STEPS] {
+    static TABLE: OnceLock<[u8; SRGB_STEPS]> = OnceLock::new();
+    TABLE.get_or_init(|| {
+        let thresholds = srgb_thresholds();
+        std::array::from_fn(|s| {
+            let low = s as f32 / SRGB_STEPS as f32;
+            thresholds.partition_point(|&t| t <= low) as u8
+        })
+    })
 }
 
 /// Linear values at which the 8-bit sRGB code steps up (255 of them).
@@ -490,6 +531,24 @@ mod tests {
             let rect = PackedRect { x: 0, y: 0, width: rect.0, height: rect.1 };
             let fast = bake_interior(&chart, &rect, &[Some(src.clone())], false);
             proptest::prop_assert_eq!(fast, bake_reference(&chart, &rect, &src));
+        }
+    }
+
+    #[test]
+    fn the_srgb_table_encodes_as_the_search_does() {
+        // Every decision point and its neighbours one ulp away, a dense sweep, and the edges.
+        let search = |x: f32| srgb_thresholds().partition_point(|&t| t <= x) as u8;
+        let mut xs = vec![f32::NAN, -1.0, -0.0, 0.0, 1.0, 1.5, f32::INFINITY, f32::MAX];
+        for &t in srgb_thresholds() {
+            xs.extend([
+                t,
+                f32::from_bits(t.to_bits() - 1),
+                f32::from_bits(t.to_bits() + 1),
+            ]);
+        }
+        xs.extend((0..=200_000).map(|k| k as f32 / 200_000.0));
+        for x in xs {
+            assert_eq!(linear_to_srgb8(x), search(x), "{x}");
         }
     }
 }
