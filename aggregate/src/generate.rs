@@ -1,6 +1,7 @@
 //! One node's aggregate (core paper sections 5 to 7): gather the children's representations,
 //! cull what cannot show, dedup near-duplicates (Table 1), merge into one instanced mesh,
-//! simplify with IAS to the node's budget, atlas, merge the parts placed alike and bake the
+//! simplify with IAS to the node's budget (dropping the smallest instances where IAS stops
+//! short of it, `detail.rs`), atlas, merge the parts placed alike and bake the
 //! placements that cost less written out than instanced into one submesh
 //! (`InstancedMesh::merge_coplaced_submeshes`, `bake_cheap_instances`: fewer draw calls and
 //! less JSON), encode (16-bit instance rotations, `ExportOptions::aggregate`).
@@ -125,6 +126,13 @@ pub struct NodeStats {
     /// That error in pixels at the nearest display distance.
     #[serde(default)]
     pub error_pixels: f64,
+    /// Instances dropped by detail culling because IAS stopped over the budget
+    /// (`detail.rs`).
+    #[serde(default)]
+    pub detail_culled: usize,
+    /// The largest footprint among them, pixels at the nearest display distance.
+    #[serde(default)]
+    pub detail_culled_pixels: f64,
 }
 
 /// A built aggregate.
@@ -287,7 +295,13 @@ fn generate_optimized(
             })
             .collect(),
     );
-    // Stage 6, atlas (section 7) and encode.
+    // Stage 6, detail culling: what IAS could not bring within the budget loses its smallest
+    // instances (this aggregate only: the handoff above keeps every version).
+    let (simplified, detail) =
+        crate::detail::cull_to_budget(simplified, stats.budget, &input.display, options);
+    stats.detail_culled = detail.instances;
+    stats.detail_culled_pixels = detail.largest_pixels;
+    // Stage 7, atlas (section 7) and encode.
     let out = if input.atlas {
         let atlas_options = AtlasOptions {
             max_bytes: options.atlas_bytes,
@@ -303,7 +317,7 @@ fn generate_optimized(
     } else {
         simplified
     };
-    // Stage 7, one draw per set of placements: parts placed alike (a model's submeshes,
+    // Stage 8, one draw per set of placements: parts placed alike (a model's submeshes,
     // one material after the atlas) merge, and cheap placements (single ones, tiny parts)
     // are baked into shared geometry.
     let out = out.merge_coplaced_submeshes().bake_cheap_instances();

@@ -8,6 +8,8 @@
 //!   dirty tracking; [`BuildOptions`], [`BuildReport`].
 //! - `generate.rs`: [`generate`], one node's pipeline: gather, cull, dedup, merge, IAS, atlas,
 //!   encode; [`Handoff`], what a node hands its parent.
+//! - `detail.rs`: detail culling, smallest instances first, where IAS cannot reach the
+//!   budget.
 //! - `dedup.rs`: Table 1 dedup with PCA alignment (section 5.1).
 //! - `pca.rs`: principal frames and sign-flip alignment.
 //! - `budget.rs`: the display model behind every budget (triangles, texels, culling).
@@ -19,6 +21,7 @@
 pub mod budget;
 mod build;
 pub mod dedup;
+pub mod detail;
 mod error;
 mod generate;
 pub mod options;
@@ -45,5 +48,6 @@ pub use store::{AggregateEntry, AggregateManifest, AggregateStore, Garbage};
 /// over in memory could lose its texture or take another part's). 5: a part without a version
 /// from the children comes from its source model instead of being left out, and Table 1 is
 /// part of every key. 6: the simplifier sweeps separate pieces (the same collapses, but equal
-/// costs may now fall in another order).
-pub const FORMAT: u32 = 6;
+/// costs may now fall in another order). 7: where IAS stops over the budget, the smallest
+/// instances are dropped until it fits (`detail.rs`).
+pub const FORMAT: u32 = 7;

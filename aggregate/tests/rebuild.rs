@@ -650,3 +650,67 @@ fn the_baseline_rebuilds_everything_after_a_build_that_lacks_a_node() {
     assert_eq!(report.built, bvh.node_count());
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Many small closed boxes that IAS cannot bring within the budget: the smallest instances are
+/// dropped until the aggregate fits, and the handoff still carries the box part for a parent.
+#[test]
+fn an_aggregate_over_its_budget_after_ias_drops_its_smallest_instances() {
+    use horizon_aggregate::budget::Display;
+    use horizon_aggregate::{generate, Handoff, NodeInput, Placement};
+    use horizon_descriptors::calibrate::Table1;
+
+    let mesh = textured_box();
+    let d = describe(&mesh, &DescriptorOptions::default())
+        .expect("describe")
+        .descriptors;
+    let models = InMemoryModels::new(vec![SourceModel::new("box".into(), mesh, d.zernike, d.csd)]);
+    // 256 boxes on a 16 x 16 grid, growing in size along the grid, each a few pixels wide:
+    // even at 4 triangles a box (a tetrahedron) they would be over the budget.
+    let placements: Vec<Placement> = (0..256)
+        .map(|k| {
+            let scale = 0.08 + 0.0005 * k as f32;
+            let at = Vec3::new((k % 16) as f32 * 0.25, 0.0, (k / 16) as f32 * 0.25);
+            Placement {
+                model: 0,
+                transform: Affine3A::from_scale_rotation_translation(
+                    Vec3::splat(scale),
+                    glam::Quat::IDENTITY,
+                    at,
+                ),
+                centre: at,
+                radius: scale * 0.87,
+            }
+        })
+        .collect();
+    let options = AggregateOptions {
+        dedup: false,
+        ..AggregateOptions::default()
+    };
+    let input = NodeInput {
+        node: 1,
+        display: Display::of(Vec3::new(1.875, 0.0, 1.875), 2.7, 2.0, &options),
+        outer_radius: 3.0,
+        placements,
+        children: Vec::new(),
+        atlas: true,
+    };
+    let out = generate(&input, &models, &Table1::calibrated(), &options).expect("generate");
+    let s = &out.stats;
+    assert_eq!(s.culled, 0, "{s:?}");
+    assert!(s.triangles_in > s.budget, "{s:?}");
+    assert!(s.detail_culled > 0, "{s:?}");
+    assert!(s.triangles_out <= s.budget, "{s:?}");
+    assert!(
+        s.detail_culled_pixels > 0.0 && s.detail_culled_pixels < 192.0,
+        "{s:?}"
+    );
+    // The GLB holds what the stats say, and the parent still gets the box.
+    let back = import_bytes(&out.glb, Format::Glb, None, &ImportOptions::default())
+        .expect("import")
+        .mesh;
+    assert_eq!(back.expanded_triangle_count(), s.triangles_out);
+    let Handoff::Versions(v) = &out.handoff else {
+        panic!("optimised handoff expected")
+    };
+    assert!(v.contains_key(&(0, 0)));
+}
