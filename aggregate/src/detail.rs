@@ -1,9 +1,9 @@
 //! Detail culling to the triangle budget: what IAS cannot remove, the smallest placements give
 //! up.
 //!
-//! IAS (core paper section 6) stops where no collapse is legal: a closed box with hard edges
-//! keeps its 12 triangles, however far away. An upper aggregate is made of hundreds of
-//! thousands of such parts (the city's root: 307,775 instances, 1.49M triangles against a
+//! IAS (core paper section 6) stops where no collapse is legal: a closed part never goes
+//! below a tetrahedron's 4 triangles, however far away. An upper aggregate is made of hundreds
+//! of thousands of such parts (the city's root: 307,775 instances, 1.49M triangles against a
 //! budget of 129,600, 13.9 MB), so simplification alone leaves it an order of magnitude over
 //! the budget that its screen size (`budget.rs`) allows. This stage then drops whole
 //! instances, smallest on screen first, until the aggregate fits: the detail that vanishes is
@@ -132,7 +132,7 @@ mod tests {
     use super::*;
     use glam::{Affine3A, Vec3};
 
-    /// A closed unit cube (12 triangles), the shape IAS cannot reduce with hard edges.
+    /// A closed unit cube (12 triangles).
     fn cube() -> Submesh {
         let positions: Vec<Vec3> = (0..8)
             .map(|i| Vec3::new((i & 1) as f32, ((i >> 1) & 1) as f32, ((i >> 2) & 1) as f32))
