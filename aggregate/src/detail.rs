@@ -53,12 +53,7 @@ pub fn cull_to_budget(
         .filter_map(|(k, inst)| {
             let sub = &mesh.submeshes[inst.submesh];
             let (centre, radius) = spheres[inst.submesh];
-            let m = inst.transform.matrix3;
-            let scale = m
-                .x_axis
-                .length()
-                .max(m.y_axis.length())
-                .max(m.z_axis.length());
+            let scale = horizon_mesh::transform::max_axis_scale(&inst.transform);
             let pixels =
                 display.object_pixels(inst.transform.transform_point3(centre), radius * scale);
             let affords = pixels >= options.pixels_per_triangle * sub.triangle_count() as f64;

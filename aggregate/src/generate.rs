@@ -221,12 +221,7 @@ fn generate_optimized(
             for m in inner {
                 let transform = p.transform * align * *m;
                 // Beyond whole objects, parts under `cull_pixels` are left out too.
-                let scale = transform
-                    .matrix3
-                    .x_axis
-                    .length()
-                    .max(transform.matrix3.y_axis.length())
-                    .max(transform.matrix3.z_axis.length());
+                let scale = horizon_mesh::transform::max_axis_scale(&transform);
                 let part_pixels = input
                     .display
                     .object_pixels(transform.transform_point3(centre), radius * scale);

@@ -26,6 +26,17 @@ impl Trs {
     }
 }
 
+/// The longest image of a unit axis under `m`'s linear part: the radius factor of a sphere's
+/// image, exact for TRS transforms (orthogonal axes, mirrors included); under shear the
+/// sphere can reach up to sqrt(3) times further along a diagonal.
+pub fn max_axis_scale(m: &Affine3A) -> f32 {
+    let l = m.matrix3;
+    l.x_axis
+        .length()
+        .max(l.y_axis.length())
+        .max(l.z_axis.length())
+}
+
 /// Relative tolerance for accepting a decomposition: the rebuilt linear part may differ from
 /// the original by this fraction of its largest entry. f32 storage already rounds at ~6e-8, so
 /// 1e-6 accepts every transform that really is TRS and refuses visible shear.

@@ -441,12 +441,7 @@ pub(crate) fn new_objects<'a>(
             .get(&o.model)
             .with_context(|| format!("model {} has no descriptors (run horizon build)", o.model))?;
         let t = Affine3A::from_cols_array(&o.transform);
-        let scale = t
-            .matrix3
-            .x_axis
-            .length()
-            .max(t.matrix3.y_axis.length())
-            .max(t.matrix3.z_axis.length());
+        let scale = horizon_mesh::transform::max_axis_scale(&t);
         out.push(NewObject {
             model: index[o.model.as_str()] as u64,
             transform: t,
