@@ -14,7 +14,7 @@
 //! (`pixels < pixels_per_triangle x triangles`) may go, and never the last one: a part big
 //! enough to pay for its triangles stays, over budget or not.
 
-use horizon_mesh::{Instance, InstancedMesh, Submesh};
+use horizon_mesh::{InstancedMesh, Submesh};
 
 use crate::budget::Display;
 use crate::options::AggregateOptions;
@@ -78,44 +78,30 @@ pub fn cull_to_budget(
         return (mesh, cull);
     }
     // Stage 3: the kept instances, and the submeshes they still use, renumbered in order.
+    let mut mesh = mesh;
+    let mut k = 0;
+    mesh.instances.retain(|_| {
+        k += 1;
+        !dropped[k - 1]
+    });
     let mut used = vec![false; mesh.submeshes.len()];
-    for (inst, _) in mesh.instances.iter().zip(&dropped).filter(|(_, &d)| !d) {
+    for inst in &mesh.instances {
         used[inst.submesh] = true;
     }
-    let mut renumber = vec![usize::MAX; mesh.submeshes.len()];
-    let mut submeshes: Vec<Submesh> = Vec::new();
-    for (s, sub) in mesh.submeshes.into_iter().enumerate() {
-        if used[s] {
-            renumber[s] = submeshes.len();
-            submeshes.push(sub);
-        }
-    }
-    let instances = mesh
-        .instances
-        .iter()
-        .zip(&dropped)
-        .filter(|(_, &d)| !d)
-        .map(|(inst, _)| Instance {
-            submesh: renumber[inst.submesh],
-            transform: inst.transform,
-        })
-        .collect();
-    let out = InstancedMesh {
-        submeshes,
-        instances,
-        materials: mesh.materials,
-        textures: mesh.textures,
-    };
-    (out, cull)
+    mesh.retain_submeshes(&used);
+    (mesh, cull)
 }
 
 /// A model-space sphere holding the submesh's used vertices: its bounding box's centre and the
 /// farthest vertex from it.
 fn model_sphere(sub: &Submesh) -> (glam::Vec3, f32) {
     let used = sub.used_positions();
-    let bounds = sub.bounds();
     if used.is_empty() {
         return (glam::Vec3::ZERO, 0.0);
+    }
+    let mut bounds = horizon_mesh::Aabb::EMPTY;
+    for &p in &used {
+        bounds.grow(p);
     }
     let centre = (bounds.min + bounds.max) * 0.5;
     let radius = used.iter().map(|p| p.distance(centre)).fold(0.0, f32::max);
@@ -126,6 +112,7 @@ fn model_sphere(sub: &Submesh) -> (glam::Vec3, f32) {
 mod tests {
     use super::*;
     use glam::{Affine3A, Vec3};
+    use horizon_mesh::Instance;
 
     /// A closed unit cube (12 triangles).
     fn cube() -> Submesh {

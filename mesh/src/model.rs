@@ -407,6 +407,33 @@ impl InstancedMesh {
         Ok(())
     }
 
+    /// Keeps the submeshes with `keep[s]` and the instances that draw them, both in their
+    /// order, renumbered; returns each old submesh's new index (`None` if it went).
+    pub fn retain_submeshes(&mut self, keep: &[bool]) -> Vec<Option<usize>> {
+        let mut next = 0;
+        let index: Vec<Option<usize>> = (0..self.submeshes.len())
+            .map(|s| {
+                keep.get(s).copied().unwrap_or(false).then(|| {
+                    next += 1;
+                    next - 1
+                })
+            })
+            .collect();
+        let mut s = 0;
+        self.submeshes.retain(|_| {
+            s += 1;
+            index[s - 1].is_some()
+        });
+        self.instances.retain_mut(|inst| match index[inst.submesh] {
+            Some(n) => {
+                inst.submesh = n;
+                true
+            }
+            None => false,
+        });
+        index
+    }
+
     /// Instances of each submesh, in instance order.
     pub fn instances_by_submesh(&self) -> Vec<Vec<usize>> {
         let mut out = vec![Vec::new(); self.submeshes.len()];
@@ -488,5 +515,44 @@ impl Submesh {
             });
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn retained_submeshes_keep_their_instances_renumbered_in_order() {
+        // Submeshes 0, 1, 2 drawn by instances 2, 0, 1, 2: keeping 0 and 2 keeps instances
+        // 0, 2 and 3, now drawing 1, 0 and 1.
+        let sub = |x: f32| Submesh {
+            positions: vec![Vec3::ZERO, Vec3::X, Vec3::new(x, 1.0, 0.0)],
+            indices: vec![0, 1, 2],
+            ..Submesh::default()
+        };
+        let at = |x: f32| glam::Affine3A::from_translation(Vec3::new(x, 0.0, 0.0));
+        let mut mesh = InstancedMesh {
+            submeshes: vec![sub(0.0), sub(1.0), sub(2.0)],
+            instances: [2, 0, 1, 2]
+                .iter()
+                .enumerate()
+                .map(|(k, &s)| Instance {
+                    submesh: s,
+                    transform: at(k as f32),
+                })
+                .collect(),
+            ..InstancedMesh::default()
+        };
+        let index = mesh.retain_submeshes(&[true, false, true]);
+        assert_eq!(index, vec![Some(0), None, Some(1)]);
+        assert_eq!(mesh.submeshes, vec![sub(0.0), sub(2.0)]);
+        let drawn: Vec<(usize, glam::Affine3A)> = mesh
+            .instances
+            .iter()
+            .map(|i| (i.submesh, i.transform))
+            .collect();
+        assert_eq!(drawn, vec![(1, at(0.0)), (0, at(1.0)), (1, at(3.0))]);
+        mesh.validate().expect("valid");
     }
 }

@@ -282,33 +282,17 @@ impl Workspace {
                 out_subs[s] = Some(sub.clone());
             }
         }
-        let mut index = vec![usize::MAX; out_subs.len()];
-        let mut submeshes = Vec::new();
-        for (i, s) in out_subs.into_iter().enumerate() {
-            if let Some(s) = s {
-                index[i] = submeshes.len();
-                submeshes.push(s);
-            }
-        }
-        let instances = mesh
-            .instances
-            .iter()
-            .filter(|i| index[i.submesh] != usize::MAX)
-            .map(|i| horizon_mesh::Instance {
-                submesh: index[i.submesh],
-                transform: i.transform,
-            })
-            .collect();
-        let out = InstancedMesh {
-            submeshes,
-            instances,
+        let keep: Vec<bool> = out_subs.iter().map(Option::is_some).collect();
+        let mut out = InstancedMesh {
+            submeshes: out_subs
+                .into_iter()
+                .map(Option::unwrap_or_default)
+                .collect(),
+            instances: mesh.instances.clone(),
             materials: mesh.materials.clone(),
             textures: mesh.textures.clone(),
         };
-        let kept = index
-            .into_iter()
-            .map(|i| (i != usize::MAX).then_some(i))
-            .collect();
+        let kept = out.retain_submeshes(&keep);
         (out, kept)
     }
 }
