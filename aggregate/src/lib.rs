@@ -49,5 +49,6 @@ pub use store::{AggregateEntry, AggregateManifest, AggregateStore, Garbage};
 /// from the children comes from its source model instead of being left out, and Table 1 is
 /// part of every key. 6: the simplifier sweeps separate pieces (the same collapses, but equal
 /// costs may now fall in another order). 7: where IAS stops over the budget, the smallest
-/// instances are dropped until it fits (`detail.rs`).
-pub const FORMAT: u32 = 7;
+/// instances are dropped until it fits (`detail.rs`). 8: submeshes of one layout share their
+/// vertex accessors (`ExportOptions::share_vertices`), the same geometry in less JSON.
+pub const FORMAT: u32 = 8;

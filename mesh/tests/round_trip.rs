@@ -4,6 +4,7 @@
 
 mod common;
 
+use std::collections::BTreeSet;
 use std::path::PathBuf;
 
 use common::{cubes, relative_difference};
@@ -410,5 +411,173 @@ fn extreme_transforms_export_without_overflow() {
             back.expanded_triangle_count(),
             mesh.expanded_triangle_count()
         );
+    }
+}
+
+/// Plain export with submeshes sharing vertex runs (as aggregates are written).
+fn shared_runs() -> ExportOptions {
+    ExportOptions {
+        share_vertices: true,
+        ..ExportOptions::plain()
+    }
+}
+
+/// The `attributes` object of each mesh's primitive, in mesh order.
+fn primitive_attributes(json: &serde_json::Value) -> Vec<serde_json::Value> {
+    json["meshes"]
+        .as_array()
+        .expect("meshes")
+        .iter()
+        .map(|m| m["primitives"][0]["attributes"].clone())
+        .collect()
+}
+
+/// The component type of each primitive's index accessor, in mesh order.
+fn index_types(json: &serde_json::Value) -> Vec<u64> {
+    json["meshes"]
+        .as_array()
+        .expect("meshes")
+        .iter()
+        .map(|m| {
+            let a = m["primitives"][0]["indices"].as_u64().expect("indices") as usize;
+            json["accessors"][a]["componentType"]
+                .as_u64()
+                .expect("type")
+        })
+        .collect()
+}
+
+#[test]
+fn every_shared_model_round_trips_exactly_with_shared_vertex_runs() {
+    for path in shared_models() {
+        let a = import_file(&path, &ImportOptions::default())
+            .expect("imports")
+            .mesh;
+        let shared = export_glb(&a, &shared_runs()).expect("exports");
+        let alone = export_glb(&a, &ExportOptions::plain()).expect("exports");
+        let name = path.display();
+        assert!(shared.len() <= alone.len(), "{name}: sharing grew the file");
+        let b = import_bytes(&shared, Format::Glb, None, &ImportOptions::default())
+            .expect("re-imports")
+            .mesh;
+        b.validate().expect("valid");
+        assert_eq!(a.submeshes.len(), b.submeshes.len(), "{name}");
+        assert_eq!(a.materials.len(), b.materials.len(), "{name}");
+        // The importer keeps what each primitive indexes, so every submesh comes back as it was.
+        for (sa, sb) in a.submeshes.iter().zip(&b.submeshes) {
+            assert!(sa.positions == sb.positions, "{name}: positions differ");
+            assert!(sa.indices == sb.indices, "{name}: indices differ");
+            assert!(sa.uvs == sb.uvs, "{name}: uvs differ");
+            assert!(sa.colors == sb.colors, "{name}: colours differ");
+            assert_eq!(sa.material, sb.material, "{name}");
+        }
+        for (ta, tb) in transforms_by_submesh(&a)
+            .iter()
+            .zip(&transforms_by_submesh(&b))
+        {
+            assert_eq!(ta.len(), tb.len(), "{name}");
+            for (x, y) in ta.iter().zip(tb) {
+                assert!(relative_difference(x, y) <= 1e-5, "{name}: {x:?} vs {y:?}");
+            }
+        }
+    }
+}
+
+#[test]
+fn submeshes_of_one_layout_share_one_run_of_vertex_accessors() {
+    // Three cubes with normals and one without, each placed twice: the three share one
+    // position and one normal accessor, the fourth (another layout) has its own; every
+    // primitive keeps its own 16-bit index accessor.
+    let mut mesh = cubes(&[
+        Affine3A::IDENTITY,
+        Affine3A::from_translation(Vec3::X * 2.0),
+    ]);
+    let mut bare = common::cube();
+    bare.normals = None;
+    for (k, sub) in [mesh.submeshes[0].clone(), mesh.submeshes[0].clone(), bare]
+        .into_iter()
+        .enumerate()
+    {
+        mesh.submeshes.push(sub);
+        for x in [0.0, 2.0] {
+            mesh.instances.push(horizon_mesh::Instance {
+                submesh: k + 1,
+                transform: Affine3A::from_translation(Vec3::new(x, 3.0 * (k + 1) as f32, 0.0)),
+            });
+        }
+    }
+    let glb = export_glb(&mesh, &shared_runs()).expect("exports");
+    let json = json_of(&glb);
+    let attributes = primitive_attributes(&json);
+    assert_eq!(attributes.len(), 4);
+    assert_eq!(attributes[0], attributes[1]);
+    assert_eq!(attributes[0], attributes[2]);
+    assert_ne!(attributes[0]["POSITION"], attributes[3]["POSITION"]);
+    assert!(attributes[3].get("NORMAL").is_none());
+    let position = attributes[0]["POSITION"].as_u64().expect("index") as usize;
+    assert_eq!(json["accessors"][position]["count"], 24, "three cubes of 8");
+    let indices: Vec<u64> = json["meshes"]
+        .as_array()
+        .expect("meshes")
+        .iter()
+        .map(|m| m["primitives"][0]["indices"].as_u64().expect("indices"))
+        .collect();
+    let distinct: BTreeSet<u64> = indices.iter().copied().collect();
+    assert_eq!(distinct.len(), 4, "one index accessor per primitive");
+    assert_eq!(index_types(&json), [5123; 4]);
+    // Three fewer vertex accessors than without sharing (two positions, two normals, less
+    // nothing for the lone layout), so the JSON is shorter.
+    let alone = json_of(&export_glb(&mesh, &ExportOptions::plain()).expect("exports"));
+    let count = |j: &serde_json::Value| j["accessors"].as_array().expect("accessors").len();
+    assert_eq!(count(&alone) - count(&json), 4);
+    // What the mesh means survives exactly.
+    let back = import_bytes(&glb, Format::Glb, None, &ImportOptions::default())
+        .expect("re-imports")
+        .mesh;
+    for (a, b) in mesh.submeshes.iter().zip(&back.submeshes) {
+        assert!(a.positions == b.positions && a.indices == b.indices);
+        assert_eq!(a.normals.is_some(), b.normals.is_some());
+    }
+    assert_eq!(transforms_by_submesh(&back), transforms_by_submesh(&mesh));
+}
+
+/// A strip of `n` vertices along x, its triangles (i, i + 1, i + 2).
+fn strip(n: u32, y: f32) -> horizon_mesh::Submesh {
+    horizon_mesh::Submesh {
+        positions: (0..n)
+            .map(|i| Vec3::new(i as f32 * 0.01, y + (i % 2) as f32, 0.0))
+            .collect(),
+        indices: (0..n - 2).flat_map(|i| [i, i + 1, i + 2]).collect(),
+        ..Default::default()
+    }
+}
+
+#[test]
+fn a_run_closes_before_it_would_pass_65535_vertices() {
+    // Three strips of 30,000 vertices: the first two fill one run (60,000), the third would
+    // take it to 90,000 and starts its own. Every index stays 16-bit.
+    let mesh = InstancedMesh {
+        submeshes: (0..3).map(|k| strip(30_000, 2.0 * k as f32)).collect(),
+        instances: (0..3)
+            .flat_map(|k| {
+                [0.0, 100.0].map(|x| horizon_mesh::Instance {
+                    submesh: k,
+                    transform: Affine3A::from_translation(Vec3::Z * x),
+                })
+            })
+            .collect(),
+        ..Default::default()
+    };
+    let glb = export_glb(&mesh, &shared_runs()).expect("exports");
+    let json = json_of(&glb);
+    let attributes = primitive_attributes(&json);
+    assert_eq!(attributes[0], attributes[1]);
+    assert_ne!(attributes[1]["POSITION"], attributes[2]["POSITION"]);
+    assert_eq!(index_types(&json), [5123; 3]);
+    let back = import_bytes(&glb, Format::Glb, None, &ImportOptions::default())
+        .expect("re-imports")
+        .mesh;
+    for (a, b) in mesh.submeshes.iter().zip(&back.submeshes) {
+        assert!(a.positions == b.positions && a.indices == b.indices);
     }
 }
