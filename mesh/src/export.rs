@@ -8,10 +8,10 @@
 //! which glTF renderers answer by flipping the winding, as [`InstancedMesh::expand`] does.
 //!
 //! With `share_vertices` (aggregates), submeshes of one attribute layout write their vertices
-//! into shared runs of up to 65,535 (one position, normal, UV and colour accessor per run) and
-//! each primitive indexes its part of the run with its own 16-bit index accessor, as glTF
-//! allows; readers that want a primitive alone drop the vertices it does not index (ours does,
-//! in import).
+//! into shared runs of up to 65,535 vertices (one position, normal, UV and colour accessor per
+//! run), and each primitive indexes its part of the run with its own 16-bit index accessor,
+//! as glTF allows; readers that want a primitive alone drop the vertices it does not index
+//! (ours does, in import).
 //!
 //! With compression (the approach of meshoptimizer's gltfpack): indices are optimised for the
 //! vertex cache and vertices for fetch order; positions become 16-bit integers whose
