@@ -48,6 +48,19 @@ fn reimport(mesh: &InstancedMesh, compress: bool) -> InstancedMesh {
     back.mesh
 }
 
+/// Every submesh of `a` and `b` placed by as many transforms, each within 1e-5 relative.
+fn assert_same_placements(name: impl std::fmt::Display, a: &InstancedMesh, b: &InstancedMesh) {
+    for (ta, tb) in transforms_by_submesh(a)
+        .iter()
+        .zip(&transforms_by_submesh(b))
+    {
+        assert_eq!(ta.len(), tb.len(), "{name}");
+        for (x, y) in ta.iter().zip(tb) {
+            assert!(relative_difference(x, y) <= 1e-5, "{name}: {x:?} vs {y:?}");
+        }
+    }
+}
+
 /// For each submesh, its instance transforms in order.
 fn transforms_by_submesh(mesh: &InstancedMesh) -> Vec<Vec<Affine3A>> {
     mesh.instances_by_submesh()
@@ -93,15 +106,7 @@ fn every_shared_model_round_trips_exactly_in_plain_glb() {
             assert!(sa.indices == sb.indices, "{name}: indices differ");
             assert!(sa.uvs == sb.uvs, "{name}: uvs differ");
         }
-        for (ta, tb) in transforms_by_submesh(&a)
-            .iter()
-            .zip(&transforms_by_submesh(&b))
-        {
-            assert_eq!(ta.len(), tb.len(), "{name}");
-            for (x, y) in ta.iter().zip(tb) {
-                assert!(relative_difference(x, y) <= 1e-5, "{name}: {x:?} vs {y:?}");
-            }
-        }
+        assert_same_placements(&name, &a, &b);
     }
 }
 
@@ -471,15 +476,7 @@ fn every_shared_model_round_trips_exactly_with_shared_vertex_runs() {
             assert!(sa.colors == sb.colors, "{name}: colours differ");
             assert_eq!(sa.material, sb.material, "{name}");
         }
-        for (ta, tb) in transforms_by_submesh(&a)
-            .iter()
-            .zip(&transforms_by_submesh(&b))
-        {
-            assert_eq!(ta.len(), tb.len(), "{name}");
-            for (x, y) in ta.iter().zip(tb) {
-                assert!(relative_difference(x, y) <= 1e-5, "{name}: {x:?} vs {y:?}");
-            }
-        }
+        assert_same_placements(&name, &a, &b);
     }
 }
 
