@@ -10,8 +10,10 @@
 //! each placement becomes one instance whose transform is the product from the scene root.
 
 use std::borrow::Cow;
+use std::cell::RefCell;
 use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
+use std::rc::Rc;
 
 use glam::{Affine3A, DMat4, DQuat, DVec3, Vec2, Vec3, Vec4};
 use gltf::json::material::AlphaMode as GltfAlphaMode;
@@ -21,8 +23,8 @@ use gltf::json::validation::Checked;
 use gltf::json::Root;
 use serde::Deserialize;
 
-use super::buffers::{missing, read_floats, read_indices, BinaryData};
-use super::{compact_vertices, gather, images, uri, ImportOptions, Imported, Limits};
+use super::buffers::{missing, read_floats, read_indices, AccessorValues, BinaryData};
+use super::{compact_vertices, images, uri, ImportOptions, Imported, Limits};
 use crate::error::ImportError;
 use crate::model::{
     AlphaMode, Instance, InstancedMesh, Material, Submesh, Texture, TextureRef, UvTransform, Wrap,
@@ -57,6 +59,7 @@ pub(crate) fn import(
         // Accessors without a buffer view cost memory without costing file bytes; allow as
         // many elements as a sixteenth of the byte limit (a VEC4 of f32 is 16 bytes).
         max_elements: limits.max_bytes / 16,
+        shared: RefCell::new(shared_vertex_accessors(&doc)),
     };
     // Stage 4: flatten the scene graph into placements of meshes.
     let placements = flatten_scenes(&reader, limits)?;
@@ -71,12 +74,74 @@ struct Reader<'a> {
     doc: &'a Root,
     data: &'a BinaryData<'a>,
     max_elements: u64,
+    /// Vertex accessors that several primitive attributes name (an aggregate's primitives
+    /// share runs of vertices, `ExportOptions::share_vertices`): the reads still to come, and
+    /// once read, the decoded values and whether all are finite. Each is decoded once and
+    /// dropped after its last reader, so a file of many primitives over one big accessor
+    /// costs the accessor once, not once per primitive.
+    shared: RefCell<HashMap<usize, SharedAccessor>>,
+}
+
+/// A vertex accessor several primitives read: reads left, and its values once decoded.
+struct SharedAccessor {
+    readers_left: usize,
+    decoded: Option<(Rc<AccessorValues>, bool)>,
 }
 
 impl Reader<'_> {
-    fn floats(&self, accessor: usize) -> Result<super::buffers::AccessorValues, ImportError> {
+    fn floats(&self, accessor: usize) -> Result<AccessorValues, ImportError> {
         read_floats(self.doc, self.data, accessor, self.max_elements)
     }
+
+    /// A vertex attribute accessor's values and whether every one is finite, decoded once
+    /// however many primitives read it.
+    fn vertex_floats(&self, accessor: usize) -> Result<(Rc<AccessorValues>, bool), ImportError> {
+        let decode = || -> Result<(Rc<AccessorValues>, bool), ImportError> {
+            let v = self.floats(accessor)?;
+            let finite = v.values.iter().all(|x| x.is_finite());
+            Ok((Rc::new(v), finite))
+        };
+        let mut shared = self.shared.borrow_mut();
+        let Some(entry) = shared.get_mut(&accessor) else {
+            return decode();
+        };
+        let out = match &entry.decoded {
+            Some((v, finite)) => (v.clone(), *finite),
+            None => {
+                let d = decode()?;
+                entry.decoded = Some(d.clone());
+                d
+            }
+        };
+        entry.readers_left = entry.readers_left.saturating_sub(1);
+        if entry.readers_left == 0 {
+            shared.remove(&accessor);
+        }
+        Ok(out)
+    }
+}
+
+/// Every accessor that more than one primitive attribute names, with how many do.
+fn shared_vertex_accessors(doc: &Root) -> HashMap<usize, SharedAccessor> {
+    let mut readers: HashMap<usize, usize> = HashMap::new();
+    for mesh in &doc.meshes {
+        for prim in &mesh.primitives {
+            for a in prim.attributes.values() {
+                *readers.entry(a.value()).or_default() += 1;
+            }
+        }
+    }
+    readers
+        .into_iter()
+        .filter(|&(_, n)| n > 1)
+        .map(|(a, n)| {
+            let entry = SharedAccessor {
+                readers_left: n,
+                decoded: None,
+            };
+            (a, entry)
+        })
+        .collect()
 }
 
 /// One mesh placed in the world.
@@ -691,11 +756,8 @@ fn convert_primitive(
     // Stage 1: positions.
     let position = attribute(Semantic::Positions)
         .ok_or_else(|| ImportError::Json(format!("{what} has no POSITION")))?;
-    let positions = vectors::<3>(r, position, &what, "POSITION", None)?
-        .into_iter()
-        .map(Vec3::from)
-        .collect::<Vec<_>>();
-    let n = positions.len();
+    let positions = vectors::<3>(r, position, &what, "POSITION", None)?;
+    let n = positions.values.len() / 3;
     // Stage 2: indices, checked, then triangulated by mode.
     let raw = match prim.indices {
         Some(a) => read_indices(r.doc, r.data, a.value(), r.max_elements)?,
@@ -721,22 +783,21 @@ fn convert_primitive(
     }
     // Stage 3: drop vertices no triangle uses (primitives often share one big accessor).
     let kept = compact_vertices(&mut indices, n);
-    // Stage 4: the other attributes, each with one entry per vertex.
+    // Stage 4: the kept vertices of every attribute, each with one entry per vertex.
     let normals = attribute(Semantic::Normals)
         .map(|a| vectors::<3>(r, a, &what, "NORMAL", Some(n)))
         .transpose()?
-        .map(|v| gather(&v, &kept).into_iter().map(Vec3::from).collect());
+        .map(|v| pick::<3>(&v, &kept).map(Vec3::from).collect());
     let uv_set = material.map_or(0, |mi| uv_sets[mi]);
     let uvs = attribute(Semantic::TexCoords(uv_set))
         .map(|a| vectors::<2>(r, a, &what, "TEXCOORD", Some(n)))
         .transpose()?
-        .map(|v| gather(&v, &kept).into_iter().map(Vec2::from).collect());
+        .map(|v| pick::<2>(&v, &kept).map(Vec2::from).collect());
     let colors = attribute(Semantic::Colors(0))
-        .map(|a| colors(r, a, &what, n))
-        .transpose()?
-        .map(|v| gather(&v, &kept));
+        .map(|a| colors(r, a, &what, n, &kept))
+        .transpose()?;
     Ok(Converted::Submesh(Submesh {
-        positions: gather(&positions, &kept),
+        positions: pick::<3>(&positions, &kept).map(Vec3::from).collect(),
         normals,
         uvs,
         colors,
@@ -745,46 +806,71 @@ fn convert_primitive(
     }))
 }
 
-/// Reads an accessor of N-component vectors, all finite, with `expected` elements if given.
+/// A vertex accessor of N-component vectors, checked: all finite, with `expected` elements
+/// if given. Shared by every primitive that reads it; [`pick`] takes a primitive's vertices.
 fn vectors<const N: usize>(
     r: &Reader<'_>,
     a: usize,
     what: &str,
     name: &str,
     expected: Option<usize>,
-) -> Result<Vec<[f32; N]>, ImportError> {
-    let v = r.floats(a)?;
+) -> Result<Rc<AccessorValues>, ImportError> {
+    let (v, finite) = r.vertex_floats(a)?;
+    checked::<N>(v, finite, &format!("{what} {name}"), expected)
+}
+
+/// `v` if it has N components, `expected` elements (if given) and only finite values.
+fn checked<const N: usize>(
+    v: Rc<AccessorValues>,
+    finite: bool,
+    what: &str,
+    expected: Option<usize>,
+) -> Result<Rc<AccessorValues>, ImportError> {
     if v.components != N {
         return Err(ImportError::Json(format!(
-            "{what} {name} has {} components, not {N}",
+            "{what} has {} components, not {N}",
             v.components
         )));
     }
     let count = v.values.len() / N;
     if let Some(e) = expected.filter(|&e| e != count) {
         return Err(ImportError::OutOfBounds {
-            what: format!("{what} {name}"),
+            what: what.to_string(),
             reason: format!("{count} elements for {e} vertices"),
         });
     }
-    if v.values.iter().any(|x| !x.is_finite()) {
-        return Err(ImportError::NonFinite(format!("{what} {name}")));
+    if !finite {
+        return Err(ImportError::NonFinite(what.to_string()));
     }
-    Ok(v.values
-        .chunks_exact(N)
-        .map(|c| std::array::from_fn(|i| c[i]))
-        .collect())
+    Ok(v)
 }
 
-fn colors(r: &Reader<'_>, a: usize, what: &str, n: usize) -> Result<Vec<Vec4>, ImportError> {
-    let components = r.floats(a)?.components;
-    Ok(match components {
-        3 => vectors::<3>(r, a, what, "COLOR_0", Some(n))?
-            .into_iter()
+/// The elements of `v` (N components each) at `kept`, in order.
+fn pick<'v, const N: usize>(
+    v: &'v AccessorValues,
+    kept: &'v [u32],
+) -> impl Iterator<Item = [f32; N]> + 'v {
+    kept.iter().map(move |&k| {
+        let at = k as usize * N;
+        std::array::from_fn(|i| v.values[at + i])
+    })
+}
+
+/// COLOR_0 at `kept`, RGB or RGBA (alpha 1 when absent).
+fn colors(
+    r: &Reader<'_>,
+    a: usize,
+    what: &str,
+    n: usize,
+    kept: &[u32],
+) -> Result<Vec<Vec4>, ImportError> {
+    let (v, finite) = r.vertex_floats(a)?;
+    let what = format!("{what} COLOR_0");
+    Ok(match v.components {
+        3 => pick::<3>(&*checked::<3>(v, finite, &what, Some(n))?, kept)
             .map(|c| Vec3::from(c).extend(1.0))
             .collect(),
-        _ => vectors::<4>(r, a, what, "COLOR_0", Some(n))?
-            .into_iter()
+        _ => pick::<4>(&*checked::<4>(v, finite, &what, Some(n))?, kept)
             .map(Vec4::from)
             .collect(),
     })

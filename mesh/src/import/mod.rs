@@ -234,8 +234,20 @@ fn trim_start(bytes: &[u8]) -> &[u8] {
 }
 
 /// Removes vertices no triangle uses and renumbers the indices, keeping vertex order.
-/// Returns the old index of each kept vertex.
+/// Returns the old index of each kept vertex. Costs O(vertices + indices) through a table
+/// when the indices cover a good part of the vertices, and O(indices log indices) when a few
+/// indices name part of a large shared accessor (as each primitive of an aggregate does).
 pub(crate) fn compact_vertices(indices: &mut [u32], vertex_count: usize) -> Vec<u32> {
+    if vertex_count / 8 > indices.len() {
+        let mut kept = indices.to_vec();
+        kept.sort_unstable();
+        kept.dedup();
+        for i in indices.iter_mut() {
+            // Every index is in `kept`, which is sorted.
+            *i = kept.partition_point(|&k| k < *i) as u32;
+        }
+        return kept;
+    }
     let mut remap = vec![u32::MAX; vertex_count];
     let mut kept = Vec::new();
     for &i in indices.iter() {
@@ -259,4 +271,31 @@ pub(crate) fn compact_vertices(indices: &mut [u32], vertex_count: usize) -> Vec<
 /// Picks the entries of `values` at `kept`.
 pub(crate) fn gather<T: Copy>(values: &[T], kept: &[u32]) -> Vec<T> {
     kept.iter().map(|&k| values[k as usize]).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::compact_vertices;
+    use proptest::prelude::*;
+
+    proptest! {
+        /// Both ways of compacting (the table, and sorting for few indices into many vertices)
+        /// keep exactly the used vertices in their order and renumber the indices to match.
+        #[test]
+        fn compaction_keeps_the_used_vertices_in_order(
+            vertex_count in 1usize..2000,
+            picks in prop::collection::vec(any::<u32>(), 0..300),
+        ) {
+            let indices: Vec<u32> = picks.iter().map(|&p| p % vertex_count as u32).collect();
+            let mut renumbered = indices.clone();
+            let kept = compact_vertices(&mut renumbered, vertex_count);
+            let mut used = indices.clone();
+            used.sort_unstable();
+            used.dedup();
+            prop_assert_eq!(&kept, &used);
+            for (new, old) in renumbered.iter().zip(&indices) {
+                prop_assert_eq!(kept[*new as usize], *old);
+            }
+        }
+    }
 }
