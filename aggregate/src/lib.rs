@@ -50,5 +50,7 @@ pub use store::{AggregateEntry, AggregateManifest, AggregateStore, Garbage};
 /// part of every key. 6: the simplifier sweeps separate pieces (the same collapses, but equal
 /// costs may now fall in another order). 7: where IAS stops over the budget, the smallest
 /// instances are dropped until it fits (`detail.rs`). 8: submeshes of one layout share their
-/// vertex accessors (`ExportOptions::share_vertices`), the same geometry in less JSON.
-pub const FORMAT: u32 = 8;
+/// vertex accessors (`ExportOptions::share_vertices`), the same geometry in less JSON. 9:
+/// normals as 8-bit and UVs as 16-bit normalized integers (`ExportOptions::short_attributes`,
+/// KHR_mesh_quantization), 20 bytes a vertex instead of 32.
+pub const FORMAT: u32 = 9;

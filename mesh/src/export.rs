@@ -11,7 +11,9 @@
 //! into shared runs of up to 65,535 vertices (one position, normal, UV and colour accessor per
 //! run), and each primitive indexes its part of the run with its own 16-bit index accessor,
 //! as glTF allows; readers that want a primitive alone drop the vertices it does not index
-//! (ours does, in import).
+//! (ours does, in import). With `short_attributes` (aggregates too) normals are 8-bit and
+//! UVs and colours 16-bit normalized integers (KHR_mesh_quantization) while positions stay
+//! float, so shared runs need no common quantisation grid.
 //!
 //! With compression (the approach of meshoptimizer's gltfpack): indices are optimised for the
 //! vertex cache and vertices for fetch order; positions become 16-bit integers whose
@@ -42,6 +44,10 @@ pub struct ExportOptions {
     /// run (see [`vertex_runs`]). Ignored when compressing (each submesh then has its own
     /// quantisation grid).
     pub share_vertices: bool,
+    /// Normals as 8-bit and UVs in [0, 1] and colours as 16-bit normalized integers
+    /// (KHR_mesh_quantization), positions still float: 20 bytes a vertex instead of 32, normals
+    /// within about 0.5 degrees. Compression always does this (and quantizes positions too).
+    pub short_attributes: bool,
 }
 
 impl ExportOptions {
@@ -51,6 +57,7 @@ impl ExportOptions {
             compress: false,
             short_rotations: false,
             share_vertices: false,
+            short_attributes: false,
         }
     }
 
@@ -60,16 +67,18 @@ impl ExportOptions {
             compress: true,
             short_rotations: true,
             share_vertices: false,
+            short_attributes: true,
         }
     }
 
-    /// Plain geometry with 16-bit instance rotations: what aggregates are written as, seen
-    /// from afar and made mostly of instances.
+    /// What aggregates are written as, seen from afar and made mostly of instances: float
+    /// positions, short normals, UVs and instance rotations, vertices shared in runs.
     pub fn aggregate() -> Self {
         Self {
             compress: false,
             short_rotations: true,
             share_vertices: true,
+            short_attributes: true,
         }
     }
 }
@@ -172,6 +181,10 @@ struct Pool {
 struct GlbWriter {
     compress: bool,
     short_rotations: bool,
+    /// Normals, UVs and colours as normalized integers (`short_attributes`, or compressing).
+    short_attributes: bool,
+    /// Whether an attribute was written as normalized integers (KHR_mesh_quantization).
+    quantized: bool,
     pools: Vec<Pool>,
     /// The GLB binary chunk (buffer 0).
     bin: Vec<u8>,
@@ -246,6 +259,8 @@ impl GlbWriter {
         Self {
             compress: options.compress,
             short_rotations: options.short_rotations,
+            short_attributes: options.compress || options.short_attributes,
+            quantized: false,
             pools: Vec::new(),
             bin: Vec::new(),
             fallback_len: 0,
@@ -439,24 +454,13 @@ impl GlbWriter {
                 let n = normals[v as usize].try_normalize().unwrap_or(Vec3::Z);
                 n.to_array()
             });
-            let a = if self.compress {
-                snorm8_attribute(unit)
-            } else {
-                float_attribute(unit, false)
-            };
+            let a = self.normal_attribute(unit);
             let i = self.write_attribute(&a, Some(ARRAY_BUFFER))?;
             attributes.insert("NORMAL".into(), json!(i));
         }
         if let Some(uvs) = &s.uvs {
             let values = order.iter().map(|&v| uvs[v as usize].to_array());
-            let in_unit = uvs
-                .iter()
-                .all(|t| t.cmpge(glam::Vec2::ZERO).all() && t.cmple(glam::Vec2::ONE).all());
-            let a = if self.compress && in_unit {
-                norm16_attribute(values, false)
-            } else {
-                float_attribute(values, false)
-            };
+            let a = self.unit_attribute(values, uvs.iter().all(|&t| in_unit_square(t)));
             let i = self.write_attribute(&a, Some(ARRAY_BUFFER))?;
             attributes.insert("TEXCOORD_0".into(), json!(i));
         }
@@ -465,11 +469,7 @@ impl GlbWriter {
             let values = order
                 .iter()
                 .map(|&v| colors[v as usize].clamp(Vec4::ZERO, Vec4::ONE).to_array());
-            let a = if self.compress {
-                norm16_attribute(values, false)
-            } else {
-                float_attribute(values, false)
-            };
+            let a = self.unit_attribute(values, true);
             let i = self.write_attribute(&a, Some(ARRAY_BUFFER))?;
             attributes.insert("COLOR_0".into(), json!(i));
         }
@@ -478,8 +478,33 @@ impl GlbWriter {
         Ok(dequantize)
     }
 
-    /// The float vertex attributes of `members` (one layout), concatenated into one accessor
-    /// each, and where each member's vertices start.
+    /// Unit normals as written: 8-bit signed normalized with short attributes, else floats.
+    fn normal_attribute(&mut self, unit: impl Iterator<Item = [f32; 3]>) -> Attribute {
+        if self.short_attributes {
+            self.quantized = true;
+            snorm8_attribute(unit)
+        } else {
+            float_attribute(unit, false)
+        }
+    }
+
+    /// Values in [0, 1] (`in_unit`: UVs that may not be) as written: 16-bit unsigned
+    /// normalized with short attributes, else floats.
+    fn unit_attribute<const N: usize>(
+        &mut self,
+        values: impl Iterator<Item = [f32; N]>,
+        in_unit: bool,
+    ) -> Attribute {
+        if self.short_attributes && in_unit {
+            self.quantized = true;
+            norm16_attribute(values, false)
+        } else {
+            float_attribute(values, false)
+        }
+    }
+
+    /// The vertex attributes of `members` (one layout), concatenated into one accessor each
+    /// (positions float), and where each member's vertices start.
     fn write_shared_vertices(&mut self, members: &[&Submesh]) -> Result<SharedRun, ExportError> {
         let mut bases = Vec::with_capacity(members.len());
         let mut count = 0u32;
@@ -504,14 +529,15 @@ impl GlbWriter {
                     .flatten()
                     .map(|n| n.try_normalize().unwrap_or(Vec3::Z).to_array())
             });
-            let i = self.write_attribute(&float_attribute(unit, false), Some(ARRAY_BUFFER))?;
+            let a = self.normal_attribute(unit);
+            let i = self.write_attribute(&a, Some(ARRAY_BUFFER))?;
             attributes.insert("NORMAL".into(), json!(i));
         }
         if first.uvs.is_some() {
-            let values = members
-                .iter()
-                .flat_map(|m| m.uvs.iter().flatten().map(|t| t.to_array()));
-            let i = self.write_attribute(&float_attribute(values, false), Some(ARRAY_BUFFER))?;
+            let uvs = || members.iter().flat_map(|m| m.uvs.iter().flatten());
+            let in_unit = uvs().all(|&t| in_unit_square(t));
+            let a = self.unit_attribute(uvs().map(|t| t.to_array()), in_unit);
+            let i = self.write_attribute(&a, Some(ARRAY_BUFFER))?;
             attributes.insert("TEXCOORD_0".into(), json!(i));
         }
         if first.colors.is_some() {
@@ -521,7 +547,8 @@ impl GlbWriter {
                     .flatten()
                     .map(|c| c.clamp(Vec4::ZERO, Vec4::ONE).to_array())
             });
-            let i = self.write_attribute(&float_attribute(values, false), Some(ARRAY_BUFFER))?;
+            let a = self.unit_attribute(values, true);
+            let i = self.write_attribute(&a, Some(ARRAY_BUFFER))?;
             attributes.insert("COLOR_0".into(), json!(i));
         }
         Ok(SharedRun {
@@ -759,7 +786,7 @@ impl GlbWriter {
                 "extensions": {"EXT_meshopt_compression": {"fallback": true}},
             }));
         }
-        if self.compress && !self.meshes.is_empty() {
+        if (self.compress && !self.meshes.is_empty()) || self.quantized {
             self.extensions_used.insert("KHR_mesh_quantization");
             self.extensions_required.insert("KHR_mesh_quantization");
         }
@@ -896,6 +923,11 @@ fn float_attribute<const N: usize>(
         count,
         bounds: (bounds && count > 0).then(|| (lo.to_vec(), hi.to_vec())),
     }
+}
+
+/// Whether a UV lies in [0, 1]^2, where 16-bit normalized integers can hold it.
+fn in_unit_square(t: glam::Vec2) -> bool {
+    t.cmpge(glam::Vec2::ZERO).all() && t.cmple(glam::Vec2::ONE).all()
 }
 
 /// Unit vectors as signed normalized bytes, padded to 4 bytes per element.

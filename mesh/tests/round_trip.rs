@@ -50,13 +50,27 @@ fn reimport(mesh: &InstancedMesh, compress: bool) -> InstancedMesh {
 
 /// Every submesh of `a` and `b` placed by as many transforms, each within 1e-5 relative.
 fn assert_same_placements(name: impl std::fmt::Display, a: &InstancedMesh, b: &InstancedMesh) {
+    assert_placements_within(name, a, b, 1e-5);
+}
+
+/// Every submesh of `a` and `b` placed by as many transforms, each within `tolerance`
+/// relative.
+fn assert_placements_within(
+    name: impl std::fmt::Display,
+    a: &InstancedMesh,
+    b: &InstancedMesh,
+    tolerance: f32,
+) {
     for (ta, tb) in transforms_by_submesh(a)
         .iter()
         .zip(&transforms_by_submesh(b))
     {
         assert_eq!(ta.len(), tb.len(), "{name}");
         for (x, y) in ta.iter().zip(tb) {
-            assert!(relative_difference(x, y) <= 1e-5, "{name}: {x:?} vs {y:?}");
+            assert!(
+                relative_difference(x, y) <= tolerance,
+                "{name}: {x:?} vs {y:?}"
+            );
         }
     }
 }
@@ -252,7 +266,11 @@ fn short_rotations_stay_within_their_quantization_error() {
         .collect();
     let mesh = cubes(&transforms);
     let plain = export_glb(&mesh, &ExportOptions::plain()).expect("exports");
-    let short = export_glb(&mesh, &ExportOptions::aggregate()).expect("exports");
+    let options = ExportOptions {
+        short_rotations: true,
+        ..ExportOptions::plain()
+    };
+    let short = export_glb(&mesh, &options).expect("exports");
     // 8 bytes saved per instance, less the accessor's `"normalized":true` in the JSON.
     assert!(
         short.len() + 8 * 20 <= plain.len() + 32,
@@ -477,6 +495,53 @@ fn every_shared_model_round_trips_exactly_with_shared_vertex_runs() {
             assert_eq!(sa.material, sb.material, "{name}");
         }
         assert_same_placements(&name, &a, &b);
+    }
+}
+
+#[test]
+fn every_shared_model_keeps_its_geometry_as_an_aggregate_within_short_attribute_error() {
+    // Aggregates write normals as 8-bit and UVs in [0, 1] as 16-bit normalized integers:
+    // positions and indices come back exactly, placements within the short rotations' error, normals within about half a
+    // degree, UVs within half a step of 1/65535, and UVs outside [0, 1] stay float, exact.
+    for path in shared_models() {
+        let a = import_file(&path, &ImportOptions::default())
+            .expect("imports")
+            .mesh;
+        let glb = export_glb(&a, &ExportOptions::aggregate()).expect("exports");
+        let name = path.display();
+        let b = import_bytes(&glb, Format::Glb, None, &ImportOptions::default())
+            .expect("re-imports")
+            .mesh;
+        b.validate().expect("valid");
+        assert_eq!(a.submeshes.len(), b.submeshes.len(), "{name}");
+        for (sa, sb) in a.submeshes.iter().zip(&b.submeshes) {
+            assert!(sa.positions == sb.positions, "{name}: positions differ");
+            assert!(sa.indices == sb.indices, "{name}: indices differ");
+            if let (Some(na), Some(nb)) = (&sa.normals, &sb.normals) {
+                for (x, y) in na.iter().zip(nb) {
+                    let x = x.try_normalize().unwrap_or(Vec3::Z);
+                    let y = y.normalize();
+                    assert!(
+                        x.angle_between(y) < 0.01,
+                        "{name}: normal {x} came back as {y}"
+                    );
+                }
+            }
+            assert_eq!(sa.normals.is_some(), sb.normals.is_some(), "{name}");
+            if let (Some(ua), Some(ub)) = (&sa.uvs, &sb.uvs) {
+                let unit = ua
+                    .iter()
+                    .all(|t| t.cmpge(glam::Vec2::ZERO).all() && t.cmple(glam::Vec2::ONE).all());
+                for (x, y) in ua.iter().zip(ub) {
+                    let off = (*x - *y).abs().max_element();
+                    let bound = if unit { 0.5 / 65535.0 + 1e-7 } else { 0.0 };
+                    assert!(off <= bound, "{name}: uv {x} came back as {y}");
+                }
+            }
+            assert_eq!(sa.uvs.is_some(), sb.uvs.is_some(), "{name}");
+        }
+        // 16-bit rotations: within about 3e-5 rad.
+        assert_placements_within(&name, &a, &b, 1e-4);
     }
 }
 
