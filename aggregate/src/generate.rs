@@ -4,7 +4,8 @@
 //! short of it, `detail.rs`), atlas, merge the parts placed alike and bake the
 //! placements that cost less written out than instanced into one submesh
 //! (`InstancedMesh::merge_coplaced_submeshes`, `bake_cheap_instances`: fewer draw calls and
-//! less JSON), encode (16-bit instance rotations, `ExportOptions::aggregate`).
+//! less JSON), encode (`ExportOptions::aggregate`: vertices shared in runs, 8-bit normals,
+//! 16-bit UVs and instance rotations).
 //!
 //! What a node hands its parent ([`Handoff`]) is not its final GLB but the simplified
 //! version of every model submesh it drew, in model space. The parent then instances one
