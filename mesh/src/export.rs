@@ -449,33 +449,42 @@ impl GlbWriter {
         let mut attributes = Map::new();
         let p = self.write_attribute(&position, Some(ARRAY_BUFFER))?;
         attributes.insert("POSITION".into(), json!(p));
-        if let Some(normals) = &s.normals {
-            let unit = order.iter().map(|&v| {
-                let n = normals[v as usize].try_normalize().unwrap_or(Vec3::Z);
-                n.to_array()
-            });
+        self.write_other_attributes(&[(s, &order)], &mut attributes)?;
+        // Stage 3: indices and the primitive.
+        self.write_primitive(attributes, indices, n, s.material)?;
+        Ok(dequantize)
+    }
+
+    /// NORMAL, TEXCOORD_0 and COLOR_0 of `parts` (one layout; each submesh's vertices in the
+    /// order given), one accessor each over all the parts: floats, or with short attributes
+    /// normalized integers. UVs stay float unless every UV of every part is in [0, 1].
+    fn write_other_attributes(
+        &mut self,
+        parts: &[(&Submesh, &[u32])],
+        attributes: &mut Map<String, Value>,
+    ) -> Result<(), ExportError> {
+        if let Some(normals) = concatenated(parts, |m| m.normals.as_ref()) {
+            let unit = normals.map(|n| n.try_normalize().unwrap_or(Vec3::Z).to_array());
             let a = self.normal_attribute(unit);
             let i = self.write_attribute(&a, Some(ARRAY_BUFFER))?;
             attributes.insert("NORMAL".into(), json!(i));
         }
-        if let Some(uvs) = &s.uvs {
-            let values = order.iter().map(|&v| uvs[v as usize].to_array());
-            let a = self.unit_attribute(values, uvs.iter().all(|&t| in_unit_square(t)));
+        if let Some(uvs) = concatenated(parts, |m| m.uvs.as_ref()) {
+            let in_unit = parts
+                .iter()
+                .all(|(m, _)| m.uvs.iter().flatten().all(|&t| in_unit_square(t)));
+            let a = self.unit_attribute(uvs.map(|t| t.to_array()), in_unit);
             let i = self.write_attribute(&a, Some(ARRAY_BUFFER))?;
             attributes.insert("TEXCOORD_0".into(), json!(i));
         }
-        if let Some(colors) = &s.colors {
+        if let Some(colors) = concatenated(parts, |m| m.colors.as_ref()) {
             // glTF colours live in [0, 1].
-            let values = order
-                .iter()
-                .map(|&v| colors[v as usize].clamp(Vec4::ZERO, Vec4::ONE).to_array());
+            let values = colors.map(|c| c.clamp(Vec4::ZERO, Vec4::ONE).to_array());
             let a = self.unit_attribute(values, true);
             let i = self.write_attribute(&a, Some(ARRAY_BUFFER))?;
             attributes.insert("COLOR_0".into(), json!(i));
         }
-        // Stage 3: indices and the primitive.
-        self.write_primitive(attributes, indices, n, s.material)?;
-        Ok(dequantize)
+        Ok(())
     }
 
     /// Unit normals as written: 8-bit signed normalized with short attributes, else floats.
@@ -512,45 +521,21 @@ impl GlbWriter {
             bases.push(count);
             count += m.positions.len() as u32;
         }
-        let first = members[0];
+        let orders: Vec<Vec<u32>> = members
+            .iter()
+            .map(|m| (0..m.positions.len() as u32).collect())
+            .collect();
+        let parts: Vec<(&Submesh, &[u32])> = members
+            .iter()
+            .zip(&orders)
+            .map(|(&m, order)| (m, order.as_slice()))
+            .collect();
         let mut attributes = Map::new();
-        let position = float_attribute(
-            members
-                .iter()
-                .flat_map(|m| m.positions.iter().map(|p| p.to_array())),
-            true,
-        );
+        let positions = members.iter().flat_map(|m| m.positions.iter());
+        let position = float_attribute(positions.map(|p| p.to_array()), true);
         let p = self.write_attribute(&position, Some(ARRAY_BUFFER))?;
         attributes.insert("POSITION".into(), json!(p));
-        if first.normals.is_some() {
-            let unit = members.iter().flat_map(|m| {
-                m.normals
-                    .iter()
-                    .flatten()
-                    .map(|n| n.try_normalize().unwrap_or(Vec3::Z).to_array())
-            });
-            let a = self.normal_attribute(unit);
-            let i = self.write_attribute(&a, Some(ARRAY_BUFFER))?;
-            attributes.insert("NORMAL".into(), json!(i));
-        }
-        if first.uvs.is_some() {
-            let uvs = || members.iter().flat_map(|m| m.uvs.iter().flatten());
-            let in_unit = uvs().all(|&t| in_unit_square(t));
-            let a = self.unit_attribute(uvs().map(|t| t.to_array()), in_unit);
-            let i = self.write_attribute(&a, Some(ARRAY_BUFFER))?;
-            attributes.insert("TEXCOORD_0".into(), json!(i));
-        }
-        if first.colors.is_some() {
-            let values = members.iter().flat_map(|m| {
-                m.colors
-                    .iter()
-                    .flatten()
-                    .map(|c| c.clamp(Vec4::ZERO, Vec4::ONE).to_array())
-            });
-            let a = self.unit_attribute(values, true);
-            let i = self.write_attribute(&a, Some(ARRAY_BUFFER))?;
-            attributes.insert("COLOR_0".into(), json!(i));
-        }
+        self.write_other_attributes(&parts, &mut attributes)?;
         Ok(SharedRun {
             attributes,
             bases,
@@ -923,6 +908,19 @@ fn float_attribute<const N: usize>(
         count,
         bounds: (bounds && count > 0).then(|| (lo.to_vec(), hi.to_vec())),
     }
+}
+
+/// The attribute `get` finds in each of `parts`, each part's vertices in its order, one part
+/// after another; `None` when the first part lacks it (all parts share one layout).
+fn concatenated<'p, T: Copy + 'p>(
+    parts: &'p [(&'p Submesh, &'p [u32])],
+    get: impl Fn(&'p Submesh) -> Option<&'p Vec<T>> + Copy + 'p,
+) -> Option<impl Iterator<Item = T> + 'p> {
+    get(parts.first()?.0)?;
+    Some(parts.iter().flat_map(move |&(m, order)| {
+        let values = get(m).expect("the parts share one layout");
+        order.iter().map(move |&v| values[v as usize])
+    }))
 }
 
 /// Whether a UV lies in [0, 1]^2, where 16-bit normalized integers can hold it.
