@@ -34,14 +34,16 @@ fn shared_models() -> Vec<PathBuf> {
 }
 
 fn reimport(mesh: &InstancedMesh, compress: bool) -> InstancedMesh {
-    let glb = export_glb(
-        mesh,
-        &ExportOptions {
-            compress,
-            ..ExportOptions::plain()
-        },
-    )
-    .expect("exports");
+    let options = ExportOptions {
+        compress,
+        ..ExportOptions::plain()
+    };
+    reimport_with(mesh, &options)
+}
+
+/// `mesh` exported with `options` and imported back, validated.
+fn reimport_with(mesh: &InstancedMesh, options: &ExportOptions) -> InstancedMesh {
+    let glb = export_glb(mesh, options).expect("exports");
     let back =
         import_bytes(&glb, Format::Glb, None, &ImportOptions::default()).expect("re-imports");
     back.mesh.validate().expect("valid");
@@ -501,18 +503,15 @@ fn every_shared_model_round_trips_exactly_with_shared_vertex_runs() {
 #[test]
 fn every_shared_model_keeps_its_geometry_as_an_aggregate_within_short_attribute_error() {
     // Aggregates write normals as 8-bit and UVs in [0, 1] as 16-bit normalized integers:
-    // positions and indices come back exactly, placements within the short rotations' error, normals within about half a
-    // degree, UVs within half a step of 1/65535, and UVs outside [0, 1] stay float, exact.
+    // positions and indices come back exactly, placements within the short rotations' error,
+    // normals within about half a degree, UVs within half a step of 1/65535, and UVs outside
+    // [0, 1] stay float, exact.
     for path in shared_models() {
         let a = import_file(&path, &ImportOptions::default())
             .expect("imports")
             .mesh;
-        let glb = export_glb(&a, &ExportOptions::aggregate()).expect("exports");
+        let b = reimport_with(&a, &ExportOptions::aggregate());
         let name = path.display();
-        let b = import_bytes(&glb, Format::Glb, None, &ImportOptions::default())
-            .expect("re-imports")
-            .mesh;
-        b.validate().expect("valid");
         assert_eq!(a.submeshes.len(), b.submeshes.len(), "{name}");
         for (sa, sb) in a.submeshes.iter().zip(&b.submeshes) {
             assert!(sa.positions == sb.positions, "{name}: positions differ");
