@@ -195,7 +195,7 @@ pub fn build_aggregates(
     let mut below_entries: HashMap<NodeId, AggregateEntry> = HashMap::new();
     for (depth, level) in levels.iter().enumerate().rev() {
         let level_start = Instant::now();
-        let results: Vec<LevelResult> = level
+        let results: Result<Vec<LevelResult>, AggregateError> = level
             .par_iter()
             .map(|&node| {
                 let key = &keys[&node];
@@ -226,7 +226,7 @@ pub fn build_aggregates(
                 let outcome = generate_with(&input, models, &table, &options.aggregate, &textures)
                     .and_then(|out| {
                         let parts = encode_parts(node.0, &out.handoff, models)?;
-                        let entry = store.put(
+                        let entry = store.stage(
                             key.clone(),
                             &out.glb,
                             parts.as_ref().map(|(b, k)| (b.as_slice(), k.clone())),
@@ -256,7 +256,11 @@ pub fn build_aggregates(
                     }
                 }
             })
-            .collect::<Result<_, AggregateError>>()?;
+            .collect();
+        // The level's files become durable and its entries journalled together, also when
+        // it stopped early: what it finished is there for the next build to reuse.
+        store.commit()?;
+        let results = results?;
         let mut next = HashMap::new();
         let mut next_entries = HashMap::new();
         let mut level_time = LevelTime {

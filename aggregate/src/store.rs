@@ -17,12 +17,19 @@
 //! file the manifest does not name is deleted (a crash in between only leaves files behind).
 //!
 //! Files are immutable and content-addressed; a changed aggregate gets a new name. Every
-//! file is written atomically (temporary file, fsync, rename, fsync of the folder), and the
-//! manifest is written last, so a crash mid-build leaves the previous manifest valid and
-//! naming files that all exist. The journal lets the next build reuse what a crashed one
-//! finished: a torn last line is ignored.
+//! file is written atomically: to a temporary file, made durable, renamed, and the folder
+//! synced; only then is its journal line appended. The manifest is written last, so a crash
+//! mid-build leaves the previous manifest valid and naming files that all exist. The journal
+//! lets the next build reuse what a crashed one finished: a torn last line is ignored.
+//!
+//! A build writes in batches ([`AggregateStore::stage`], then [`AggregateStore::commit`]
+//! once per tree level): the level's temporary files are made durable together (one
+//! `syncfs` on Linux, else one fsync each), then renamed, then each folder is synced once.
+//! An fsync and a folder sync per file took 18% of the city's full build. A crash loses
+//! at most the level being built, whose files are still temporary (garbage collection
+//! deletes them).
 
-use std::collections::{BTreeMap, HashMap};
+use std::collections::{BTreeMap, HashMap, HashSet};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -85,6 +92,31 @@ pub struct AggregateStore {
     journal: Mutex<Option<std::fs::File>>,
     /// Whether aggregate GLBs are written (false for a measuring store).
     keep_glbs: bool,
+    /// What [`AggregateStore::stage`] wrote since the last commit.
+    staged: Mutex<Staged>,
+}
+
+/// Writes not yet committed: temporary files, not yet durable, under their own names.
+#[derive(Debug, Default)]
+struct Staged {
+    /// (temporary file, final path), in the order written.
+    files: Vec<(PathBuf, PathBuf)>,
+    /// The final paths among them (a content-addressed file is written once).
+    paths: HashSet<PathBuf>,
+    /// Journal lines of the staged entries.
+    journal: Vec<u8>,
+}
+
+impl Drop for AggregateStore {
+    /// Staged files that were never committed are not durable: they go (a build that stops
+    /// with an error commits first).
+    fn drop(&mut self) {
+        if let Ok(staged) = self.staged.get_mut() {
+            for (tmp, _) in &staged.files {
+                let _ = std::fs::remove_file(tmp);
+            }
+        }
+    }
 }
 
 impl AggregateStore {
@@ -94,6 +126,7 @@ impl AggregateStore {
             root: root.to_path_buf(),
             journal: Mutex::new(None),
             keep_glbs: true,
+            staged: Mutex::new(Staged::default()),
         }
     }
 
@@ -101,10 +134,9 @@ impl AggregateStore {
     /// GLB (parts files, journal and manifest are kept as usual): for aggregates that are
     /// only measured.
     pub fn measuring(root: &Path) -> Self {
-        Self {
-            keep_glbs: false,
-            ..Self::new(root)
-        }
+        let mut store = Self::new(root);
+        store.keep_glbs = false;
+        store
     }
 
     /// The folder.
@@ -188,8 +220,23 @@ impl AggregateStore {
     }
 
     /// Stores an aggregate's GLB (unless the store is measuring) and parts, then journals its
-    /// entry.
+    /// entry: [`AggregateStore::stage`] and [`AggregateStore::commit`].
     pub fn put(
+        &self,
+        key: String,
+        glb: &[u8],
+        parts: Option<(&[u8], PartList)>,
+        stats: NodeStats,
+    ) -> Result<AggregateEntry, AggregateError> {
+        let entry = self.stage(key, glb, parts, stats)?;
+        self.commit()?;
+        Ok(entry)
+    }
+
+    /// Writes an aggregate's GLB (unless the store is measuring) and parts as temporary files
+    /// and holds back its journal line, until [`AggregateStore::commit`]: before that, neither
+    /// the files nor the entry are in the store.
+    pub fn stage(
         &self,
         key: String,
         glb: &[u8],
@@ -198,12 +245,12 @@ impl AggregateStore {
     ) -> Result<AggregateEntry, AggregateError> {
         let glb_hash = content_hash(glb);
         if self.keep_glbs {
-            write_if_absent(&self.glb(&glb_hash), glb)?;
+            self.stage_file(self.glb(&glb_hash), glb)?;
         }
         let (parts_hash, part_keys) = match parts {
             Some((bytes, keys)) => {
                 let h = content_hash(bytes);
-                write_if_absent(&self.parts(&h), bytes)?;
+                self.stage_file(self.parts(&h), bytes)?;
                 (Some(h), keys)
             }
             None => (None, Vec::new()),
@@ -215,8 +262,73 @@ impl AggregateStore {
             part_keys,
             stats,
         };
-        self.journal(&entry)?;
+        let line = self.journal_line(&entry)?;
+        self.lock_staged()?.journal.extend(line);
         Ok(entry)
+    }
+
+    /// Makes every staged file durable and puts it in place, then journals the staged
+    /// entries. Nothing staged: nothing done.
+    pub fn commit(&self) -> Result<(), AggregateError> {
+        let staged = std::mem::take(&mut *self.lock_staged()?);
+        if staged.journal.is_empty() && staged.files.is_empty() {
+            return Ok(());
+        }
+        let result = self.put_in_place(&staged.files);
+        if result.is_err() {
+            for (tmp, _) in &staged.files {
+                let _ = std::fs::remove_file(tmp);
+            }
+        }
+        result?;
+        self.journal(&staged.journal)
+    }
+
+    /// Durable, then renamed, then each folder synced once.
+    fn put_in_place(&self, files: &[(PathBuf, PathBuf)]) -> Result<(), AggregateError> {
+        if files.is_empty() {
+            return Ok(());
+        }
+        sync_files(&self.root, files.iter().map(|(tmp, _)| tmp.as_path()))?;
+        let mut folders: Vec<PathBuf> = Vec::new();
+        for (tmp, path) in files {
+            std::fs::rename(tmp, path).map_err(|e| AggregateError::io(path, e))?;
+            let folder = path.parent().map(Path::to_path_buf).unwrap_or_default();
+            if !folders.contains(&folder) {
+                folders.push(folder);
+            }
+        }
+        // The renames are durable once their folders are synced (not supported everywhere).
+        for folder in folders {
+            if let Ok(d) = std::fs::File::open(&folder) {
+                let _ = d.sync_all();
+            }
+        }
+        Ok(())
+    }
+
+    /// Writes `bytes` to a temporary file beside `path`, unless `path` exists or is staged
+    /// (content-addressed files never change).
+    fn stage_file(&self, path: PathBuf, bytes: &[u8]) -> Result<(), AggregateError> {
+        if path.exists() || self.lock_staged()?.paths.contains(&path) {
+            return Ok(());
+        }
+        let tmp = write_temporary(&path, bytes)?;
+        let mut staged = self.lock_staged()?;
+        if staged.paths.insert(path.clone()) {
+            staged.files.push((tmp, path));
+        } else {
+            // Another thread staged the same content meanwhile.
+            let _ = std::fs::remove_file(&tmp);
+        }
+        Ok(())
+    }
+
+    /// The staged writes, locked.
+    fn lock_staged(&self) -> Result<std::sync::MutexGuard<'_, Staged>, AggregateError> {
+        self.staged
+            .lock()
+            .map_err(|_| AggregateError::Tree("staging lock poisoned".into()))
     }
 
     /// One journal line: the entry as JSON and a newline.
@@ -238,10 +350,9 @@ impl AggregateStore {
             .map_err(|_| AggregateError::Tree("journal lock poisoned".into()))
     }
 
-    /// Appends one entry to the journal and flushes it.
-    fn journal(&self, entry: &AggregateEntry) -> Result<(), AggregateError> {
+    /// Appends journal lines and flushes them.
+    fn journal(&self, lines: &[u8]) -> Result<(), AggregateError> {
         let path = self.journal_path();
-        let line = self.journal_line(entry)?;
         let mut guard = self.lock_journal()?;
         if guard.is_none() {
             std::fs::create_dir_all(&self.root).map_err(|e| AggregateError::io(&self.root, e))?;
@@ -253,7 +364,7 @@ impl AggregateStore {
             *guard = Some(file);
         }
         if let Some(file) = guard.as_mut() {
-            file.write_all(&line)
+            file.write_all(lines)
                 .map_err(|e| AggregateError::io(&path, e))?;
         }
         Ok(())
@@ -321,18 +432,9 @@ impl AggregateStore {
     }
 }
 
-/// Writes `bytes` to `path` unless a file is already there (content-addressed files never
-/// change).
-fn write_if_absent(path: &Path, bytes: &[u8]) -> Result<(), AggregateError> {
-    if path.exists() {
-        return Ok(());
-    }
-    write_atomically(path, bytes)
-}
-
-/// Writes `bytes` to `path` so that a reader (or a crash) sees the old file or the whole new
-/// one: a uniquely named temporary file in the same folder, fsync, rename, fsync the folder.
-pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), AggregateError> {
+/// Writes `bytes` to a new, uniquely named temporary file in `path`'s folder (created if
+/// need be), not yet synced; returns its path. Garbage collection deletes such files.
+fn write_temporary(path: &Path, bytes: &[u8]) -> Result<PathBuf, AggregateError> {
     static COUNTER: AtomicU64 = AtomicU64::new(0);
     let dir = match path.parent() {
         Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
@@ -348,18 +450,51 @@ pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), AggregateError>
         std::process::id(),
         COUNTER.fetch_add(1, Ordering::Relaxed)
     ));
+    let result = std::fs::File::create(&tmp).and_then(|mut file| file.write_all(bytes));
+    result.map_err(|e| {
+        let _ = std::fs::remove_file(&tmp);
+        AggregateError::io(path, e)
+    })?;
+    Ok(tmp)
+}
+
+/// Makes `files` durable: on Linux one `syncfs` of the file system holding `root` (every
+/// dirty page of it, in one flush), else, or if that fails, an fsync of each file.
+fn sync_files<'a>(
+    root: &Path,
+    files: impl Iterator<Item = &'a Path>,
+) -> Result<(), AggregateError> {
+    #[cfg(target_os = "linux")]
+    {
+        if let Ok(d) = std::fs::File::open(root) {
+            if rustix::fs::syncfs(&d).is_ok() {
+                return Ok(());
+            }
+        }
+    }
+    let _ = root;
+    for f in files {
+        std::fs::File::open(f)
+            .and_then(|file| file.sync_all())
+            .map_err(|e| AggregateError::io(f, e))?;
+    }
+    Ok(())
+}
+
+/// Writes `bytes` to `path` so that a reader (or a crash) sees the old file or the whole new
+/// one: a uniquely named temporary file in the same folder, fsync, rename, fsync the folder.
+pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), AggregateError> {
+    let tmp = write_temporary(path, bytes)?;
     let result = (|| {
-        let mut file = std::fs::File::create(&tmp)?;
-        file.write_all(bytes)?;
-        file.sync_all()?;
+        std::fs::File::open(&tmp)?.sync_all()?;
         std::fs::rename(&tmp, path)?;
         // The rename is durable once the folder is synced (not supported everywhere).
-        if let Ok(d) = std::fs::File::open(&dir) {
+        if let Some(d) = path.parent().and_then(|d| std::fs::File::open(d).ok()) {
             let _ = d.sync_all();
         }
         Ok(())
     })();
-    result.map_err(|e| {
+    result.map_err(|e: std::io::Error| {
         let _ = std::fs::remove_file(&tmp);
         AggregateError::io(path, e)
     })
@@ -482,6 +617,73 @@ mod tests {
             .put("new".into(), b"new glb", None, NodeStats::default())
             .expect("put after gc");
         assert_eq!(store.known().expect("known").len(), 2);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn staged_writes_appear_only_on_commit() {
+        let dir = std::env::temp_dir().join(format!("horizon-stage-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let store = AggregateStore::new(&dir);
+        let parts = Some((&b"staged parts"[..], Vec::new()));
+        let e = store
+            .stage("k1".into(), b"staged glb", parts, NodeStats::default())
+            .expect("stage");
+        // The same content staged twice is written once.
+        let twin = store
+            .stage("k2".into(), b"staged glb", None, NodeStats::default())
+            .expect("stage");
+        assert_eq!(twin.glb, e.glb);
+        // Before the commit: temporary files only, and no entry.
+        assert!(!store.glb(&e.glb).exists());
+        assert!(!store.parts(e.parts.as_deref().expect("parts")).exists());
+        assert!(store.known().expect("known").is_empty());
+        store.commit().expect("commit");
+        assert!(store.glb(&e.glb).exists());
+        assert!(store.parts(e.parts.as_deref().expect("parts")).exists());
+        let known = store.known().expect("known");
+        assert_eq!(known.len(), 2);
+        assert_eq!(known["k1"], e);
+        // No temporary file is left, and an empty commit does nothing.
+        store.commit().expect("empty commit");
+        let temporaries = |d: &Path| {
+            std::fs::read_dir(d)
+                .map(|r| {
+                    r.filter_map(Result::ok)
+                        .filter(|f| f.file_name().to_string_lossy().ends_with(".tmp"))
+                        .count()
+                })
+                .unwrap_or(0)
+        };
+        assert_eq!(temporaries(&dir) + temporaries(&dir.join("parts")), 0);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn a_store_dropped_before_its_commit_leaves_nothing_behind() {
+        let dir = std::env::temp_dir().join(format!("horizon-uncommitted-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let kept = {
+            let store = AggregateStore::new(&dir);
+            let kept = store
+                .put("kept".into(), b"kept glb", None, NodeStats::default())
+                .expect("put");
+            store
+                .stage("lost".into(), b"lost glb", None, NodeStats::default())
+                .expect("stage");
+            kept
+        };
+        let store = AggregateStore::new(&dir);
+        let known = store.known().expect("known");
+        assert_eq!(known.len(), 1);
+        assert_eq!(known["kept"], kept);
+        let files: Vec<String> = std::fs::read_dir(&dir)
+            .expect("dir")
+            .filter_map(Result::ok)
+            .map(|f| f.file_name().to_string_lossy().into_owned())
+            .collect();
+        assert!(files.iter().all(|f| !f.ends_with(".tmp")), "{files:?}");
+        assert_eq!(files.iter().filter(|f| f.ends_with(".glb")).count(), 1);
         let _ = std::fs::remove_dir_all(&dir);
     }
 
