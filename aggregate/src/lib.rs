@@ -52,5 +52,7 @@ pub use store::{AggregateEntry, AggregateManifest, AggregateStore, Garbage};
 /// instances are dropped until it fits (`detail.rs`). 8: submeshes of one layout share their
 /// vertex accessors (`ExportOptions::share_vertices`), the same geometry in less JSON. 9:
 /// normals as 8-bit and UVs as 16-bit normalized integers (`ExportOptions::short_attributes`,
-/// KHR_mesh_quantization), 20 bytes a vertex instead of 32.
-pub const FORMAT: u32 = 9;
+/// KHR_mesh_quantization), 20 bytes a vertex instead of 32. 10: shrunk charts are baked
+/// trilinearly from the source's mip chain instead of by a box of at most 3 x 3 bilinear
+/// samples (`horizon_atlas`'s `bake.rs`).
+pub const FORMAT: u32 = 10;

@@ -7,6 +7,14 @@
 //! atlas texel centre at `(i + 0.5, j + 0.5)` inside its rectangle maps to the chart point
 //! `min + (i + 0.5, j + 0.5) * (box size / rect size)`, the inverse of the UV remapping; at scale
 //! 1 that is a source texel centre and bilinear sampling returns the texel unchanged.
+//!
+//! A chart kept at full size or enlarged is sampled bilinearly. A shrunk one is sampled
+//! trilinearly, as a GPU samples a mipmapped texture (OpenGL 4.6, section 8.14): the level of
+//! detail is log2 of the larger of the two steps (source texels per atlas texel), and the two
+//! mip levels around it (`cache.rs`, built in linear light) are each sampled bilinearly and
+//! blended. Every shrink factor is thus filtered over its whole footprint at a cost of two
+//! bilinear samples per texel; a box of up to 3 x 3 bilinear samples, the earlier filter, cost
+//! up to nine and aliased beyond a third of full size, where the upper aggregates live.
 
 use std::sync::{Arc, OnceLock};
 
@@ -15,15 +23,10 @@ use horizon_mesh::model::{AlphaMode, InstancedMesh, Wrap};
 use image::{Rgba, RgbaImage};
 use rayon::prelude::*;
 
-use crate::cache::TextureCache;
+use crate::cache::{DecodedTexture, TextureCache};
 use crate::chart::Chart;
 use crate::pack::{Layout, PackedRect};
 use crate::AtlasError;
-
-/// Most bilinear samples per atlas texel and axis when a chart shrinks: a box filter over up to
-/// 3 x 3 bilinear source points (each itself a 2 x 2 footprint). 8 x 8 made baking most of a
-/// whole world's aggregate build; beyond 1/3 scale some high-frequency detail aliases instead.
-const MAX_SUPERSAMPLE: f64 = 3.0;
 
 /// Texel coordinates are clamped to +-2^52 before conversion to integers: beyond that an f64
 /// has no fractional texels left, and the sum `x0 + 1` stays far from i64 overflow.
@@ -32,10 +35,18 @@ const FAR_TEXEL: f64 = 4_503_599_627_370_496.0;
 /// A decoded texture with the wrap modes it is sampled with.
 #[derive(Clone, Debug)]
 pub(crate) struct Source {
-    /// RGBA8, sRGB colour and linear alpha (shared through the [`TextureCache`]).
-    pub image: Arc<RgbaImage>,
+    /// RGBA8, sRGB colour and linear alpha, with its mip chain (shared through the
+    /// [`TextureCache`]).
+    pub texture: Arc<DecodedTexture>,
     /// Wrap modes along U and V.
     pub wrap: [Wrap; 2],
+}
+
+impl Source {
+    /// Level 0: the image itself.
+    pub fn image(&self) -> &RgbaImage {
+        &self.texture.image
+    }
 }
 
 /// Decodes every texture referenced by a material that some submesh uses; the others stay
@@ -65,12 +76,12 @@ pub(crate) fn decode_sources(
             if !used {
                 return Ok(None);
             }
-            let image = cache
+            let decoded = cache
                 .decode(tex)
                 .map_err(|source| AtlasError::Decode { texture, source })?;
-            let nonempty = image.width() > 0 && image.height() > 0;
+            let nonempty = decoded.image.width() > 0 && decoded.image.height() > 0;
             Ok(nonempty.then_some(Source {
-                image,
+                texture: decoded,
                 wrap: [tex.wrap_u, tex.wrap_v],
             }))
         })
@@ -120,11 +131,11 @@ pub(crate) fn bake_atlas(
 
 /// One chart's rectangle, row by row: resampled, multiplied, alpha resolved, encoded.
 ///
-/// The sample grid is separable: a texel's box of `kx x ky` bilinear points takes its columns
-/// from `i` alone and its rows from `j` alone. So every column tap (two wrapped texel indices
-/// and a weight) and every row tap is computed once per chart rather than once per texel, with
-/// the same arithmetic as a bilinear sample of the whole point (`sample_bilinear`, the tests'
-/// reference): the result is the same bit for bit.
+/// The sample grid is separable: a texel's bilinear sample of a level takes its column from
+/// `i` alone and its row from `j` alone. So every column tap (two wrapped texel indices and a
+/// weight) and every row tap is computed once per chart and level rather than once per texel,
+/// with the same arithmetic as a bilinear sample of the whole point (`sample_bilinear`, the
+/// tests' reference): the result is the same bit for bit.
 fn bake_interior(
     chart: &Chart,
     rect: &PackedRect,
@@ -133,55 +144,100 @@ fn bake_interior(
 ) -> Vec<Rgba<u8>> {
     let source = chart.texture.and_then(|t| sources.get(t)?.as_ref());
     let step = (chart.max - chart.min) / DVec2::new(f64::from(rect.width), f64::from(rect.height));
-    let samples = step.ceil().clamp(DVec2::ONE, DVec2::splat(MAX_SUPERSAMPLE));
-    let (kx, ky) = (samples.x as u32, samples.y as u32);
-    let weight = 1.0 / (kx * ky) as f32;
     let texels = rect.width as usize * rect.height as usize;
     let Some(src) = source else {
         let flat = encode_texel(Vec4::ONE * chart.factor, chart.alpha, opaque);
         return vec![flat; texels];
     };
-    let (w, h) = src.image.dimensions();
-    // Byte offsets into the RGBA8 pixels: a column's texel times 4, a row's times the row.
-    let columns = taps(chart.min.x, step.x, rect.width, kx, w, src.wrap[0], 4);
-    let rows = taps(
-        chart.min.y,
-        step.y,
-        rect.height,
-        ky,
-        h,
-        src.wrap[1],
-        w as usize * 4,
-    );
-    let pixels: &[u8] = src.image.as_raw();
-    let texel = |x: usize, y: usize| {
-        let k = x + y;
-        texel_linear(&Rgba([
-            pixels[k],
-            pixels[k + 1],
-            pixels[k + 2],
-            pixels[k + 3],
-        ]))
-    };
+    let (lower, upper, blend) = lod_levels(step, src.texture.levels());
+    let first = LevelTaps::new(chart, rect, step, src, lower);
+    let second = (blend > 0.0).then(|| LevelTaps::new(chart, rect, step, src, upper));
     let mut out = Vec::with_capacity(texels);
-    for row in rows.chunks_exact(ky as usize) {
-        for column in columns.chunks_exact(kx as usize) {
-            let mut colour = Vec4::ZERO;
-            for y in row {
-                for x in column {
-                    let top = texel(x.at[0], y.at[0]) * (1.0 - x.t) + texel(x.at[1], y.at[0]) * x.t;
-                    let bottom =
-                        texel(x.at[0], y.at[1]) * (1.0 - x.t) + texel(x.at[1], y.at[1]) * x.t;
-                    colour += top * (1.0 - y.t) + bottom * y.t;
-                }
-            }
-            if kx * ky > 1 {
-                colour *= weight;
+    for j in 0..rect.height as usize {
+        for i in 0..rect.width as usize {
+            let mut colour = first.sample(i, j);
+            if let Some(second) = &second {
+                colour = colour * (1.0 - blend) + second.sample(i, j) * blend;
             }
             out.push(encode_texel(colour * chart.factor, chart.alpha, opaque));
         }
     }
     out
+}
+
+/// The mip levels a chart sampled at `step` source texels per atlas texel reads, and the
+/// weight of the second: level of detail log2 of the larger step (0 when not shrunk), the
+/// levels below and above it, clamped to the `levels` the chain has.
+fn lod_levels(step: DVec2, levels: usize) -> (usize, usize, f32) {
+    let last = levels.saturating_sub(1);
+    let larger = step.x.max(step.y);
+    if larger.is_nan() || larger <= 1.0 {
+        return (0, 0, 0.0);
+    }
+    let lod = larger.log2().min(last as f64);
+    let lower = lod.floor() as usize;
+    let upper = (lower + 1).min(last);
+    let blend = if upper == lower {
+        0.0
+    } else {
+        (lod - lower as f64) as f32
+    };
+    (lower, upper, blend)
+}
+
+/// The column and row taps of one mip level over a chart's rectangle.
+struct LevelTaps<'a> {
+    columns: Vec<Tap>,
+    rows: Vec<Tap>,
+    pixels: &'a [u8],
+}
+
+impl<'a> LevelTaps<'a> {
+    /// Level `level` of `src`: the chart's box and step in that level's texels (a level's
+    /// side over the image's side; for an odd side, about one half).
+    fn new(chart: &Chart, rect: &PackedRect, step: DVec2, src: &'a Source, level: usize) -> Self {
+        let image = src.texture.level(level);
+        let (w, h) = image.dimensions();
+        let (w0, h0) = src.image().dimensions();
+        let to_level = DVec2::new(
+            f64::from(w) / f64::from(w0.max(1)),
+            f64::from(h) / f64::from(h0.max(1)),
+        );
+        let (min, step) = (chart.min * to_level, step * to_level);
+        Self {
+            // Byte offsets into the RGBA8 pixels: a column's texel times 4, a row's times the
+            // row.
+            columns: taps(min.x, step.x, rect.width, 1, w, src.wrap[0], 4),
+            rows: taps(
+                min.y,
+                step.y,
+                rect.height,
+                1,
+                h,
+                src.wrap[1],
+                w as usize * 4,
+            ),
+            pixels: image.as_raw(),
+        }
+    }
+
+    /// The bilinear sample of atlas texel (`i`, `j`) in linear light.
+    #[inline]
+    fn sample(&self, i: usize, j: usize) -> Vec4 {
+        let (x, y) = (self.columns[i], self.rows[j]);
+        let texel = |a: usize, b: usize| {
+            let k = a + b;
+            texel_linear(&Rgba([
+                self.pixels[k],
+                self.pixels[k + 1],
+                self.pixels[k + 2],
+                self.pixels[k + 3],
+            ]))
+        };
+        let top = texel(x.at[0], y.at[0]) * (1.0 - x.t) + texel(x.at[1], y.at[0]) * x.t;
+        let bottom = texel(x.at[0], y.at[1]) * (1.0 - x.t) + texel(x.at[1], y.at[1]) * x.t;
+        top * (1.0 - y.t) + bottom * y.t
+    }
 }
 
 /// One axis of a bilinear sample: where the two source texels it blends start (their index
@@ -244,23 +300,17 @@ fn encode_texel(colour: Vec4, alpha: AlphaMode, opaque: bool) -> Rgba<u8> {
 /// wrap modes; returns linear RGB and alpha. The bake does the same per axis ([`taps`]); this
 /// whole-point form is the reference its tests hold it to.
 #[cfg(test)]
-fn sample_bilinear(src: &Source, p: DVec2) -> Vec4 {
-    let (w, h) = src.image.dimensions();
+fn sample_bilinear(image: &RgbaImage, wrap: [Wrap; 2], p: DVec2) -> Vec4 {
+    let (w, h) = image.dimensions();
     let q = p - DVec2::splat(0.5);
     // Far tiles fold like near ones; clamping first keeps `x0 + 1` from overflowing i64.
     let f =
         DVec2::new(floor(q.x), floor(q.y)).clamp(DVec2::splat(-FAR_TEXEL), DVec2::splat(FAR_TEXEL));
     let t = (q - f).as_vec2();
     let (x0, y0) = (f.x as i64, f.y as i64);
-    let xs = [
-        wrap_index(x0, w, src.wrap[0]),
-        wrap_index(x0 + 1, w, src.wrap[0]),
-    ];
-    let ys = [
-        wrap_index(y0, h, src.wrap[1]),
-        wrap_index(y0 + 1, h, src.wrap[1]),
-    ];
-    let texel = |x: u32, y: u32| texel_linear(src.image.get_pixel(x, y));
+    let xs = [wrap_index(x0, w, wrap[0]), wrap_index(x0 + 1, w, wrap[0])];
+    let ys = [wrap_index(y0, h, wrap[1]), wrap_index(y0 + 1, h, wrap[1])];
+    let texel = |x: u32, y: u32| texel_linear(image.get_pixel(x, y));
     let top = texel(xs[0], ys[0]) * (1.0 - t.x) + texel(xs[1], ys[0]) * t.x;
     let bottom = texel(xs[0], ys[1]) * (1.0 - t.x) + texel(xs[1], ys[1]) * t.x;
     top * (1.0 - t.y) + bottom * t.y
@@ -268,8 +318,8 @@ fn sample_bilinear(src: &Source, p: DVec2) -> Vec4 {
 
 /// The mean colour of a texture in linear light, for a textured material drawn without UVs.
 pub(crate) fn mean_linear(src: &Source) -> Vec4 {
-    let n = (src.image.width() as f64 * src.image.height() as f64).max(1.0);
-    let sum = src.image.pixels().fold(glam::DVec4::ZERO, |acc, px| {
+    let n = (src.image().width() as f64 * src.image().height() as f64).max(1.0);
+    let sum = src.image().pixels().fold(glam::DVec4::ZERO, |acc, px| {
         acc + texel_linear(px).as_dvec4()
     });
     (sum / n).as_vec4()
@@ -315,7 +365,7 @@ fn wrap_index(i: i64, n: u32, wrap: Wrap) -> u32 {
 }
 
 /// One texel as linear RGB and alpha.
-fn texel_linear(px: &Rgba<u8>) -> Vec4 {
+pub(crate) fn texel_linear(px: &Rgba<u8>) -> Vec4 {
     let lut = srgb_to_linear_table();
     Vec4::new(
         lut[px[0] as usize],
@@ -453,49 +503,138 @@ mod tests {
         let mut image = RgbaImage::new(2, 1);
         image.put_pixel(0, 0, Rgba([10, 20, 30, 255]));
         image.put_pixel(1, 0, Rgba([200, 100, 50, 128]));
-        let src = Source {
-            image: image.into(),
-            wrap: [Wrap::Repeat; 2],
-        };
-        let c = sample_bilinear(&src, DVec2::new(1.5, 0.5));
+        let wrap = [Wrap::Repeat; 2];
+        let c = sample_bilinear(&image, wrap, DVec2::new(1.5, 0.5));
         assert_eq!(
             encode_texel(c, AlphaMode::Blend, false),
             Rgba([200, 100, 50, 128])
         );
         // Two texels to the right is the same texel again under Repeat.
-        let c = sample_bilinear(&src, DVec2::new(3.5, 0.5));
+        let c = sample_bilinear(&image, wrap, DVec2::new(3.5, 0.5));
         assert_eq!(
             encode_texel(c, AlphaMode::Blend, false),
             Rgba([200, 100, 50, 128])
         );
     }
 
-    /// The bake before its taps were shared: every sample through [`sample_bilinear`].
+    /// The bake before its taps were shared: every sample through [`sample_bilinear`], on
+    /// the levels [`lod_levels`] picks, each point mapped into the level the way the taps are.
     fn bake_reference(chart: &Chart, rect: &PackedRect, src: &Source) -> Vec<Rgba<u8>> {
         let step =
             (chart.max - chart.min) / DVec2::new(f64::from(rect.width), f64::from(rect.height));
-        let samples = step.ceil().clamp(DVec2::ONE, DVec2::splat(MAX_SUPERSAMPLE));
-        let (kx, ky) = (samples.x as u32, samples.y as u32);
+        let (lower, upper, blend) = lod_levels(step, src.texture.levels());
+        let (w0, h0) = src.image().dimensions();
+        let sample = |level: usize, i: u32, j: u32| {
+            let image = src.texture.level(level);
+            let (w, h) = image.dimensions();
+            let to_level = DVec2::new(f64::from(w) / f64::from(w0), f64::from(h) / f64::from(h0));
+            let (min, step) = (chart.min * to_level, step * to_level);
+            let sub = DVec2::new(f64::from(i) + 0.5, f64::from(j) + 0.5);
+            sample_bilinear(image, src.wrap, min + sub * step)
+        };
         let mut out = Vec::new();
         for j in 0..rect.height {
             for i in 0..rect.width {
-                let mut colour = Vec4::ZERO;
-                for b in 0..ky {
-                    for a in 0..kx {
-                        let sub = DVec2::new(
-                            f64::from(i) + (f64::from(a) + 0.5) / f64::from(kx),
-                            f64::from(j) + (f64::from(b) + 0.5) / f64::from(ky),
-                        );
-                        colour += sample_bilinear(src, chart.min + sub * step);
-                    }
-                }
-                if kx * ky > 1 {
-                    colour *= 1.0 / (kx * ky) as f32;
+                let mut colour = sample(lower, i, j);
+                if blend > 0.0 {
+                    colour = colour * (1.0 - blend) + sample(upper, i, j) * blend;
                 }
                 out.push(encode_texel(colour * chart.factor, chart.alpha, false));
             }
         }
         out
+    }
+
+    /// A chart over the whole of a `side` x `side` texture, baked into `rect` x `rect` texels.
+    fn bake_whole(image: RgbaImage, rect: u32) -> Vec<Rgba<u8>> {
+        let (w, h) = image.dimensions();
+        let src = Source {
+            texture: Arc::new(DecodedTexture::new(image)),
+            wrap: [Wrap::Repeat; 2],
+        };
+        let chart = Chart {
+            texture: Some(0),
+            material: None,
+            factor: Vec4::ONE,
+            alpha: AlphaMode::Opaque,
+            min: DVec2::ZERO,
+            max: DVec2::new(f64::from(w), f64::from(h)),
+            cap: DVec2::splat(1e9),
+        };
+        let rect = PackedRect {
+            x: 0,
+            y: 0,
+            width: rect,
+            height: rect,
+        };
+        bake_interior(&chart, &rect, &[Some(src)], true)
+    }
+
+    #[test]
+    fn a_shrunk_checkerboard_bakes_to_its_mean_not_to_one_of_its_colours() {
+        // One-texel black and white squares shrunk 2, 5, 8 and 16 times: every texel is the
+        // mean, mid grey (sRGB 188 is linear 0.5), within a few codes. The earlier 3 x 3 box
+        // of bilinear samples baked the 5x board as a coarser checkerboard of 159 and 211.
+        for shrink in [2u32, 5, 8, 16] {
+            let side = 16 * shrink;
+            let board = RgbaImage::from_fn(side, side, |x, y| {
+                let v = if (x + y) % 2 == 0 { 0 } else { 255 };
+                Rgba([v, v, v, 255])
+            });
+            for px in bake_whole(board, 16) {
+                assert!(
+                    (i32::from(px[0]) - 188).abs() <= 6,
+                    "shrunk {shrink}x: {px:?}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn a_flat_texture_bakes_flat_at_every_scale() {
+        let flat = RgbaImage::from_pixel(37, 23, Rgba([90, 160, 30, 255]));
+        for rect in [1u32, 3, 10, 23, 37, 80] {
+            for px in bake_whole(flat.clone(), rect) {
+                assert_eq!(px, Rgba([90, 160, 30, 255]), "rect {rect}");
+            }
+        }
+    }
+
+    #[test]
+    fn the_level_of_detail_follows_the_larger_step() {
+        // Not shrunk: level 0 alone. Shrunk 2x: level 1 alone. 3x: between 1 and 2.
+        assert_eq!(lod_levels(DVec2::new(1.0, 0.5), 8), (0, 0, 0.0));
+        assert_eq!(lod_levels(DVec2::new(0.5, 2.0), 8), (1, 2, 0.0));
+        let (lower, upper, blend) = lod_levels(DVec2::splat(3.0), 8);
+        assert_eq!((lower, upper), (1, 2));
+        assert!((blend - (3.0f32.log2() - 1.0)).abs() < 1e-6);
+        // Beyond the chain: its last level.
+        assert_eq!(lod_levels(DVec2::splat(1e6), 4), (3, 3, 0.0));
+        assert_eq!(lod_levels(DVec2::splat(f64::NAN), 4), (0, 0, 0.0));
+    }
+
+    #[test]
+    fn every_mip_level_halves_and_keeps_the_mean() {
+        let mut state = 7u64;
+        let image = RgbaImage::from_fn(13, 6, |_, _| {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            let b = (state >> 24).to_le_bytes();
+            Rgba([b[0], b[1], b[2], 255])
+        });
+        let chain = crate::cache::mip_chain(&image);
+        let sides: Vec<(u32, u32)> = chain.iter().map(RgbaImage::dimensions).collect();
+        assert_eq!(sides, vec![(7, 3), (4, 2), (2, 1), (1, 1)]);
+        // A level of even sides keeps its mean in linear light (up to 8-bit rounding).
+        let mean = |im: &RgbaImage| {
+            let n = f64::from(im.width() * im.height());
+            im.pixels()
+                .fold(glam::DVec4::ZERO, |a, p| a + texel_linear(p).as_dvec4())
+                / n
+        };
+        let (a, b) = (mean(&chain[1]), mean(&chain[2]));
+        assert!((a - b).abs().max_element() < 0.01, "{a} {b}");
     }
 
     proptest::proptest! {
@@ -518,7 +657,10 @@ mod tests {
                 Rgba([b[0], b[1], b[2], b[3]])
             });
             let modes = [Wrap::Repeat, Wrap::MirroredRepeat, Wrap::ClampToEdge];
-            let src = Source { image: image.into(), wrap: [modes[wraps.0], modes[wraps.1]] };
+            let src = Source {
+                texture: Arc::new(DecodedTexture::new(image)),
+                wrap: [modes[wraps.0], modes[wraps.1]],
+            };
             let chart = Chart {
                 texture: Some(0),
                 material: None,

@@ -4,15 +4,90 @@
 //! object atlases that object's textures, and on the city, decoding them was a third of the
 //! aggregate build. The cache keeps decoded images by their encoded bytes, up to a byte
 //! budget, so each decodes once per build. A hit compares the bytes themselves, so two
-//! textures share an image only when they are the same file.
+//! textures share an image only when they are the same file. Each image's mip chain (the bake
+//! samples shrunk charts from it) is built on first use and kept with it.
 
 use std::collections::hash_map::DefaultHasher;
 use std::collections::{HashMap, VecDeque};
 use std::hash::{Hash, Hasher};
-use std::sync::{Arc, Mutex};
+use std::sync::{Arc, Mutex, OnceLock};
 
 use horizon_mesh::model::Texture;
-use image::RgbaImage;
+use image::{Rgba, RgbaImage};
+
+use crate::bake::{linear_to_srgb8, texel_linear};
+
+/// A decoded texture and, once asked for, its mip chain.
+#[derive(Debug)]
+pub struct DecodedTexture {
+    /// RGBA8: sRGB colour, linear alpha.
+    pub image: RgbaImage,
+    /// Levels 1, 2, ... down to 1 x 1, each half the one above (rounded up).
+    mips: OnceLock<Vec<RgbaImage>>,
+}
+
+impl DecodedTexture {
+    /// `image` with no mip chain built yet.
+    pub fn new(image: RgbaImage) -> Self {
+        Self {
+            image,
+            mips: OnceLock::new(),
+        }
+    }
+
+    /// Levels in the chain, the image itself included.
+    pub fn levels(&self) -> usize {
+        1 + self.mip_chain().len()
+    }
+
+    /// Level `k` of the chain (0: the image), clamped to the last.
+    pub fn level(&self, k: usize) -> &RgbaImage {
+        match k {
+            0 => &self.image,
+            k => {
+                let chain = self.mip_chain();
+                chain.get(k - 1).or(chain.last()).unwrap_or(&self.image)
+            }
+        }
+    }
+
+    fn mip_chain(&self) -> &[RgbaImage] {
+        self.mips.get_or_init(|| mip_chain(&self.image))
+    }
+}
+
+/// Every level below `image`: each texel the mean, in linear light (alpha linear), of the 2 x 2
+/// texels above it; an odd side's last texel repeats the edge. The bake samples these so that
+/// a chart shrunk by any factor is filtered rather than aliased (`bake.rs`).
+pub(crate) fn mip_chain(image: &RgbaImage) -> Vec<RgbaImage> {
+    let mut out: Vec<RgbaImage> = Vec::new();
+    loop {
+        let above = out.last().unwrap_or(image);
+        let (w, h) = above.dimensions();
+        if (w <= 1 && h <= 1) || w == 0 || h == 0 {
+            return out;
+        }
+        let (nw, nh) = (w.div_ceil(2), h.div_ceil(2));
+        let next = RgbaImage::from_fn(nw, nh, |x, y| {
+            let xs = [2 * x, (2 * x + 1).min(w - 1)];
+            let ys = [2 * y, (2 * y + 1).min(h - 1)];
+            let mut sum = glam::Vec4::ZERO;
+            for &yy in &ys {
+                for &xx in &xs {
+                    sum += texel_linear(above.get_pixel(xx, yy));
+                }
+            }
+            let mean = sum * 0.25;
+            Rgba([
+                linear_to_srgb8(mean.x),
+                linear_to_srgb8(mean.y),
+                linear_to_srgb8(mean.z),
+                (mean.w.clamp(0.0, 1.0) * 255.0).round() as u8,
+            ])
+        });
+        out.push(next);
+    }
+}
 
 /// Decoded textures by content, up to a budget of decoded bytes; the oldest entries go first.
 #[derive(Debug)]
@@ -34,7 +109,7 @@ struct Entries {
 #[derive(Debug)]
 struct Entry {
     encoded: Arc<[u8]>,
-    image: Arc<RgbaImage>,
+    image: Arc<DecodedTexture>,
 }
 
 impl TextureCache {
@@ -47,14 +122,14 @@ impl TextureCache {
     }
 
     /// The decoded image of `texture`: from the cache, or decoded now and kept.
-    pub fn decode(&self, texture: &Texture) -> Result<Arc<RgbaImage>, image::ImageError> {
+    pub fn decode(&self, texture: &Texture) -> Result<Arc<DecodedTexture>, image::ImageError> {
         let hash = hash_of(&texture.bytes);
         if let Some(image) = self.get(hash, &texture.bytes) {
             return Ok(image);
         }
         // Decoded outside the lock: other atlases keep going meanwhile (two may decode the
         // same texture at once; the first kept wins).
-        let image = Arc::new(texture.decode()?);
+        let image = Arc::new(DecodedTexture::new(texture.decode()?));
         self.insert(hash, &texture.bytes, &image);
         Ok(image)
     }
@@ -70,7 +145,7 @@ impl TextureCache {
         self.inner.lock().unwrap_or_else(|e| e.into_inner())
     }
 
-    fn get(&self, hash: u64, bytes: &[u8]) -> Option<Arc<RgbaImage>> {
+    fn get(&self, hash: u64, bytes: &[u8]) -> Option<Arc<DecodedTexture>> {
         let entries = self.lock();
         entries
             .map
@@ -80,8 +155,8 @@ impl TextureCache {
             .map(|e| Arc::clone(&e.image))
     }
 
-    fn insert(&self, hash: u64, bytes: &[u8], image: &Arc<RgbaImage>) {
-        let size = image.as_raw().len();
+    fn insert(&self, hash: u64, bytes: &[u8], image: &Arc<DecodedTexture>) {
+        let size = held_size(image);
         if size > self.budget {
             return;
         }
@@ -104,7 +179,7 @@ impl TextureCache {
             let mut freed = 0;
             if let Some(bucket) = entries.map.get_mut(&old_hash) {
                 if let Some(k) = bucket.iter().position(|e| Arc::ptr_eq(&e.encoded, &old)) {
-                    freed = bucket.swap_remove(k).image.as_raw().len();
+                    freed = held_size(&bucket.swap_remove(k).image);
                 }
                 if bucket.is_empty() {
                     entries.map.remove(&old_hash);
@@ -113,6 +188,12 @@ impl TextureCache {
             entries.bytes -= freed;
         }
     }
+}
+
+/// Bytes an entry holds: the image and (built or not) its mip chain, a third more.
+fn held_size(image: &DecodedTexture) -> usize {
+    let base = image.image.as_raw().len();
+    base + base / 3
 }
 
 fn hash_of(bytes: &[u8]) -> u64 {

@@ -77,7 +77,7 @@ pub(crate) fn chart_mesh(
             .and_then(|t| sources.get(t.texture)?.as_ref().map(|s| (t, s)));
         match (textured, &sub.uvs) {
             (Some((tref, source)), Some(uvs)) => {
-                let (w, h) = source.image.dimensions();
+                let (w, h) = source.image().dimensions();
                 let size = DVec2::new(f64::from(w), f64::from(h));
                 let texel = |uv: Vec2| -> DVec2 {
                     let t = tref.transform.map_or(uv, |x| x.apply(uv));

@@ -37,8 +37,9 @@
 //!   at which the crunch packer places all padded rectangles in `max_side` squared, found by
 //!   shrinking 10% at a time from the area bound and then bisecting the last step. The packer
 //!   spreads rectangles over the square it is given, so the square is then tightened from the
-//!   area bound up in 5% steps. Below scale 1, each atlas texel averages a grid of bilinear
-//!   samples (a box filter) so that downscaled noise does not alias.
+//!   area bound up in 5% steps. Below scale 1, each atlas texel is a trilinear sample of the
+//!   source's mip chain (built in linear light), so that downscaled detail of any frequency
+//!   is averaged rather than aliased.
 //! - **Colour.** glTF base colour textures are sRGB and the factor is linear: texels are decoded
 //!   to linear light, filtered, multiplied by the factor and encoded back to sRGB. Alpha is
 //!   linear. A `Mask` material's alpha is baked as 0 or 1 against its own cut-off, so masks with
@@ -57,6 +58,10 @@
 //! - Charts are axis-aligned UV boxes, never rotated: a diagonal island wastes its box's corners.
 //! - Filtering is not alpha-premultiplied: below scale 1, colour of transparent texels can bleed
 //!   into the edges of `Blend` cut-outs.
+//! - The level of detail follows the larger of a chart's two steps, as a GPU's isotropic
+//!   filtering does: a chart shrunk much more along one axis than the other is blurred along
+//!   the other. A shrunk chart's border texels also average source texels just outside its
+//!   box (at most the footprint of one atlas texel).
 //! - Gutters guard bilinear filtering and the first mip levels only; deep mips and JPEG's 8x8
 //!   blocks (and chroma subsampling) can still mix neighbouring charts slightly.
 //! - crunch's packing time grows about quadratically with the chart count (one to two seconds
@@ -75,7 +80,7 @@ use horizon_mesh::model::{
     AlphaMode, InstancedMesh, InvalidMesh, Material, Submesh, Texture, TextureRef, Wrap,
 };
 
-pub use cache::TextureCache;
+pub use cache::{DecodedTexture, TextureCache};
 pub use pack::{pack_rects, Layout, LayoutError, PackedRect, MAXRECTS_MAX_CHARTS};
 
 /// Most source widths (or heights) of texels a chart keeps along one axis; a chart tiling more
