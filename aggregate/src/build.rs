@@ -550,7 +550,7 @@ fn encode_parts(
             (mesh, keys)
         }
     };
-    let bytes = export_glb(&mesh, &ExportOptions::plain()).map_err(|e| AggregateError::Glb {
+    let bytes = export_glb(&mesh, &ExportOptions::parts()).map_err(|e| AggregateError::Glb {
         node,
         reason: e.to_string(),
     })?;

@@ -71,6 +71,15 @@ impl ExportOptions {
         }
     }
 
+    /// Lossless and compact, for files only Horizon reads back (an aggregate's parts): float
+    /// attributes and rotations exactly as in memory, vertices shared in runs.
+    pub fn parts() -> Self {
+        Self {
+            share_vertices: true,
+            ..Self::plain()
+        }
+    }
+
     /// What aggregates are written as, seen from afar and made mostly of instances: float
     /// positions, short normals, UVs and instance rotations, vertices shared in runs.
     pub fn aggregate() -> Self {
