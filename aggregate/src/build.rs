@@ -259,8 +259,9 @@ pub fn build_aggregates(
             .collect();
         // The level's files become durable and its entries journalled together, also when
         // it stopped early: what it finished is there for the next build to reuse.
-        store.commit()?;
+        let committed = store.commit();
         let results = results?;
+        committed?;
         let mut next = HashMap::new();
         let mut next_entries = HashMap::new();
         let mut level_time = LevelTime {

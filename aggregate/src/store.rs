@@ -94,6 +94,10 @@ pub struct AggregateStore {
     keep_glbs: bool,
     /// What [`AggregateStore::stage`] wrote since the last commit.
     staged: Mutex<Staged>,
+    /// Held by a commit from taking the staged writes until their journal lines are
+    /// appended, so that a later commit (whose lines may name files an earlier one took)
+    /// appends only after those files are in place.
+    committing: Mutex<()>,
 }
 
 /// Writes not yet committed: temporary files, not yet durable, under their own names.
@@ -127,6 +131,7 @@ impl AggregateStore {
             journal: Mutex::new(None),
             keep_glbs: true,
             staged: Mutex::new(Staged::default()),
+            committing: Mutex::new(()),
         }
     }
 
@@ -270,6 +275,10 @@ impl AggregateStore {
     /// Makes every staged file durable and puts it in place, then journals the staged
     /// entries. Nothing staged: nothing done.
     pub fn commit(&self) -> Result<(), AggregateError> {
+        let _one_at_a_time = self
+            .committing
+            .lock()
+            .map_err(|_| AggregateError::Tree("commit lock poisoned".into()))?;
         let staged = std::mem::take(&mut *self.lock_staged()?);
         if staged.journal.is_empty() && staged.files.is_empty() {
             return Ok(());
@@ -489,7 +498,11 @@ pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), AggregateError>
         std::fs::File::open(&tmp)?.sync_all()?;
         std::fs::rename(&tmp, path)?;
         // The rename is durable once the folder is synced (not supported everywhere).
-        if let Some(d) = path.parent().and_then(|d| std::fs::File::open(d).ok()) {
+        let dir = match path.parent() {
+            Some(d) if !d.as_os_str().is_empty() => d,
+            _ => Path::new("."),
+        };
+        if let Ok(d) = std::fs::File::open(dir) {
             let _ = d.sync_all();
         }
         Ok(())

@@ -171,7 +171,7 @@ fn bake_interior(
 fn lod_levels(step: DVec2, levels: usize) -> (usize, usize, f32) {
     let last = levels.saturating_sub(1);
     let larger = step.x.max(step.y);
-    if larger.is_nan() || larger <= 1.0 {
+    if step.is_nan() || larger <= 1.0 {
         return (0, 0, 0.0);
     }
     let lod = larger.log2().min(last as f64);
@@ -185,6 +185,11 @@ fn lod_levels(step: DVec2, levels: usize) -> (usize, usize, f32) {
     (lower, upper, blend)
 }
 
+/// Image texels to level-`level` texels: `2^-level`.
+fn level_scale(level: usize) -> f64 {
+    0.5f64.powi(i32::try_from(level).unwrap_or(i32::MAX))
+}
+
 /// The column and row taps of one mip level over a chart's rectangle.
 struct LevelTaps<'a> {
     columns: Vec<Tap>,
@@ -193,16 +198,12 @@ struct LevelTaps<'a> {
 }
 
 impl<'a> LevelTaps<'a> {
-    /// Level `level` of `src`: the chart's box and step in that level's texels (a level's
-    /// side over the image's side; for an odd side, about one half).
+    /// Level `level` of `src`: the chart's box and step in that level's texels, `2^-level`
+    /// of the image's (`cache.rs`: a level's texel covers `2^level` image texels a side).
     fn new(chart: &Chart, rect: &PackedRect, step: DVec2, src: &'a Source, level: usize) -> Self {
         let image = src.texture.level(level);
         let (w, h) = image.dimensions();
-        let (w0, h0) = src.image().dimensions();
-        let to_level = DVec2::new(
-            f64::from(w) / f64::from(w0.max(1)),
-            f64::from(h) / f64::from(h0.max(1)),
-        );
+        let to_level = level_scale(level);
         let (min, step) = (chart.min * to_level, step * to_level);
         Self {
             // Byte offsets into the RGBA8 pixels: a column's texel times 4, a row's times the
@@ -523,11 +524,9 @@ mod tests {
         let step =
             (chart.max - chart.min) / DVec2::new(f64::from(rect.width), f64::from(rect.height));
         let (lower, upper, blend) = lod_levels(step, src.texture.levels());
-        let (w0, h0) = src.image().dimensions();
         let sample = |level: usize, i: u32, j: u32| {
             let image = src.texture.level(level);
-            let (w, h) = image.dimensions();
-            let to_level = DVec2::new(f64::from(w) / f64::from(w0), f64::from(h) / f64::from(h0));
+            let to_level = 0.5f64.powi(level as i32);
             let (min, step) = (chart.min * to_level, step * to_level);
             let sub = DVec2::new(f64::from(i) + 0.5, f64::from(j) + 0.5);
             sample_bilinear(image, src.wrap, min + sub * step)
@@ -626,6 +625,11 @@ mod tests {
         let chain = crate::cache::mip_chain(&image);
         let sides: Vec<(u32, u32)> = chain.iter().map(RgbaImage::dimensions).collect();
         assert_eq!(sides, vec![(7, 3), (4, 2), (2, 1), (1, 1)]);
+        // The level count comes from the size alone, without building the chain.
+        assert_eq!(DecodedTexture::new(image.clone()).levels(), 1 + chain.len());
+        for (w, h, levels) in [(1, 1, 1), (1, 9, 5), (64, 64, 7), (65, 2, 8)] {
+            assert_eq!(DecodedTexture::new(RgbaImage::new(w, h)).levels(), levels);
+        }
         // A level of even sides keeps its mean in linear light (up to 8-bit rounding).
         let mean = |im: &RgbaImage| {
             let n = f64::from(im.width() * im.height());

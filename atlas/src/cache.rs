@@ -35,9 +35,18 @@ impl DecodedTexture {
         }
     }
 
-    /// Levels in the chain, the image itself included.
+    /// Levels in the chain, the image itself included (from the image's size: the chain
+    /// is not built for this).
     pub fn levels(&self) -> usize {
-        1 + self.mip_chain().len()
+        let (w, h) = self.image.dimensions();
+        if w == 0 || h == 0 {
+            return 1;
+        }
+        let (mut w, mut h, mut n) = (w, h, 1);
+        while w > 1 || h > 1 {
+            (w, h, n) = (w.div_ceil(2), h.div_ceil(2), n + 1);
+        }
+        n
     }
 
     /// Level `k` of the chain (0: the image), clamped to the last.
@@ -57,8 +66,9 @@ impl DecodedTexture {
 }
 
 /// Every level below `image`: each texel the mean, in linear light (alpha linear), of the 2 x 2
-/// texels above it; an odd side's last texel repeats the edge. The bake samples these so that
-/// a chart shrunk by any factor is filtered rather than aliased (`bake.rs`).
+/// texels above it, so texel `i` of level `k` covers texels `i 2^k .. (i + 1) 2^k` of the
+/// image; past an odd side the edge texel is repeated (clamp to edge). The bake samples these
+/// so that a chart shrunk by any factor is filtered rather than aliased (`bake.rs`).
 pub(crate) fn mip_chain(image: &RgbaImage) -> Vec<RgbaImage> {
     let mut out: Vec<RgbaImage> = Vec::new();
     loop {
@@ -190,10 +200,18 @@ impl TextureCache {
     }
 }
 
-/// Bytes an entry holds: the image and (built or not) its mip chain, a third more.
+/// Bytes an entry holds: the image and (built or not) its mip chain.
 fn held_size(image: &DecodedTexture) -> usize {
-    let base = image.image.as_raw().len();
-    base + base / 3
+    let (mut w, mut h) = image.image.dimensions();
+    let mut bytes = w as usize * h as usize * 4;
+    if w == 0 || h == 0 {
+        return bytes;
+    }
+    while w > 1 || h > 1 {
+        (w, h) = (w.div_ceil(2), h.div_ceil(2));
+        bytes += w as usize * h as usize * 4;
+    }
+    bytes
 }
 
 fn hash_of(bytes: &[u8]) -> u64 {

@@ -459,16 +459,16 @@ fn a_texture_cache_changes_no_atlas() {
     let cache = TextureCache::new(1 << 20);
     let cold_a = build_atlas(&a, &AtlasOptions::default()).expect("atlas");
     let cold_b = build_atlas(&b, &AtlasOptions::default()).expect("atlas");
-    // An entry holds the RGBA8 image and its mip chain (a third more).
-    let held = |rgba: usize| rgba + rgba / 3;
+    // An entry holds the RGBA8 image and its mip chain: 64, 32, ..., 1 texels a side.
+    let held: usize = (0..7).map(|k| (64usize >> k).pow(2) * 4).sum();
     let warm_a = build_atlas_with(&a, &AtlasOptions::default(), &cache).expect("atlas");
-    assert_eq!(cache.held_bytes(), held(64 * 64 * 4));
+    assert_eq!(cache.held_bytes(), held);
     let again_a = build_atlas_with(&a, &AtlasOptions::default(), &cache).expect("atlas");
-    assert_eq!(cache.held_bytes(), held(64 * 64 * 4), "a hit adds nothing");
+    assert_eq!(cache.held_bytes(), held, "a hit adds nothing");
     let warm_b = build_atlas_with(&b, &AtlasOptions::default(), &cache).expect("atlas");
     assert_eq!(
         cache.held_bytes(),
-        2 * held(64 * 64 * 4),
+        2 * held,
         "other bytes are another entry"
     );
     for (warm, cold) in [(&warm_a, &cold_a), (&again_a, &cold_a), (&warm_b, &cold_b)] {
@@ -483,8 +483,8 @@ fn a_texture_cache_changes_no_atlas() {
 #[test]
 fn a_texture_cache_keeps_to_its_budget() {
     let tex = |seed: u64| png_texture(&noise(32, 32, seed, false), Wrap::Repeat);
-    // The RGBA8 image and its mip chain (a third more).
-    let one = 32 * 32 * 4 + 32 * 32 * 4 / 3;
+    // The RGBA8 image and its mip chain: 32, 16, ..., 1 texels a side.
+    let one: usize = (0..6).map(|k| (32usize >> k).pow(2) * 4).sum();
     let cache = TextureCache::new(2 * one);
     for seed in 0..5 {
         let image = cache.decode(&tex(seed)).expect("decodes");
