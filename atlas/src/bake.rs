@@ -208,16 +208,8 @@ impl<'a> LevelTaps<'a> {
         Self {
             // Byte offsets into the RGBA8 pixels: a column's texel times 4, a row's times the
             // row.
-            columns: taps(min.x, step.x, rect.width, 1, w, src.wrap[0], 4),
-            rows: taps(
-                min.y,
-                step.y,
-                rect.height,
-                1,
-                h,
-                src.wrap[1],
-                w as usize * 4,
-            ),
+            columns: taps(min.x, step.x, rect.width, w, src.wrap[0], 4),
+            rows: taps(min.y, step.y, rect.height, h, src.wrap[1], w as usize * 4),
             pixels: image.as_raw(),
         }
     }
@@ -249,29 +241,26 @@ struct Tap {
     t: f32,
 }
 
-/// The taps along one axis of a rectangle `size` texels long, `k` samples per texel: texel
-/// `i`, sample `a` sits at `min + (i + (a + 0.5) / k) * step` in source texel space (the
-/// per-axis half of a bilinear sample, computed the same way).
-fn taps(min: f64, step: f64, size: u32, k: u32, n: u32, wrap: Wrap, stride: usize) -> Vec<Tap> {
-    let mut out = Vec::with_capacity(size as usize * k as usize);
-    for i in 0..size {
-        for a in 0..k {
-            let sub = f64::from(i) + (f64::from(a) + 0.5) / f64::from(k);
-            let q = (min + sub * step) - 0.5;
+/// The taps along one axis of a rectangle `size` texels long: texel `i` samples
+/// `min + (i + 0.5) * step` in source texel space (the per-axis half of a bilinear sample,
+/// computed the same way).
+fn taps(min: f64, step: f64, size: u32, n: u32, wrap: Wrap, stride: usize) -> Vec<Tap> {
+    (0..size)
+        .map(|i| {
+            let q = (min + (f64::from(i) + 0.5) * step) - 0.5;
             // The clamp of `sample_bilinear` (glam's, which also sends NaN to the low end).
             let f = floor(q);
             let f = if f > -FAR_TEXEL { f } else { -FAR_TEXEL };
             let f = if f < FAR_TEXEL { f } else { FAR_TEXEL };
             let t = (q - f) as f32;
             let i0 = f as i64;
-            out.push(Tap {
+            Tap {
                 at: [wrap_index(i0, n, wrap), wrap_index(i0 + 1, n, wrap)]
                     .map(|i| i as usize * stride),
                 t,
-            });
-        }
-    }
-    out
+            }
+        })
+        .collect()
 }
 
 /// Linear RGBA to an sRGB texel, after the material's alpha mode: a mask becomes 0 or 1 against

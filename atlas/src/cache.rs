@@ -38,15 +38,7 @@ impl DecodedTexture {
     /// Levels in the chain, the image itself included (from the image's size: the chain
     /// is not built for this).
     pub fn levels(&self) -> usize {
-        let (w, h) = self.image.dimensions();
-        if w == 0 || h == 0 {
-            return 1;
-        }
-        let (mut w, mut h, mut n) = (w, h, 1);
-        while w > 1 || h > 1 {
-            (w, h, n) = (w.div_ceil(2), h.div_ceil(2), n + 1);
-        }
-        n
+        level_sides(self.image.dimensions()).count()
     }
 
     /// Level `k` of the chain (0: the image), clamped to the last.
@@ -202,16 +194,17 @@ impl TextureCache {
 
 /// Bytes an entry holds: the image and (built or not) its mip chain.
 fn held_size(image: &DecodedTexture) -> usize {
-    let (mut w, mut h) = image.image.dimensions();
-    let mut bytes = w as usize * h as usize * 4;
-    if w == 0 || h == 0 {
-        return bytes;
-    }
-    while w > 1 || h > 1 {
-        (w, h) = (w.div_ceil(2), h.div_ceil(2));
-        bytes += w as usize * h as usize * 4;
-    }
-    bytes
+    level_sides(image.image.dimensions())
+        .map(|(w, h)| w as usize * h as usize * 4)
+        .sum()
+}
+
+/// The sides of every level of an image of side `(w, h)`, the image first: each half the one
+/// before, rounded up, down to 1 x 1 (an image without texels is its only level).
+fn level_sides((w, h): (u32, u32)) -> impl Iterator<Item = (u32, u32)> {
+    std::iter::successors(Some((w, h)), |&(w, h)| {
+        (w > 0 && h > 0 && (w > 1 || h > 1)).then(|| (w.div_ceil(2), h.div_ceil(2)))
+    })
 }
 
 fn hash_of(bytes: &[u8]) -> u64 {

@@ -33,6 +33,19 @@ fn shared_models() -> Vec<PathBuf> {
     out
 }
 
+/// Every shared model with its name, imported with the default options.
+fn shared_meshes() -> Vec<(String, InstancedMesh)> {
+    shared_models()
+        .into_iter()
+        .map(|path| {
+            let mesh = import_file(&path, &ImportOptions::default())
+                .expect("imports")
+                .mesh;
+            (path.display().to_string(), mesh)
+        })
+        .collect()
+}
+
 fn reimport(mesh: &InstancedMesh, compress: bool) -> InstancedMesh {
     let options = ExportOptions {
         compress,
@@ -87,17 +100,14 @@ fn transforms_by_submesh(mesh: &InstancedMesh) -> Vec<Vec<Affine3A>> {
 
 #[test]
 fn every_shared_model_round_trips_exactly_in_plain_glb() {
-    let models = shared_models();
+    let models = shared_meshes();
+    let names: Vec<&String> = models.iter().map(|(name, _)| name).collect();
     assert!(
         models.len() >= 8,
-        "expected the eight shared models, found {models:?}"
+        "expected the eight shared models, found {names:?}"
     );
-    for path in models {
-        let a = import_file(&path, &ImportOptions::default())
-            .expect("imports")
-            .mesh;
+    for (name, a) in models {
         let b = reimport(&a, false);
-        let name = path.display();
         assert_eq!(
             a.expanded_triangle_count(),
             b.expanded_triangle_count(),
@@ -128,12 +138,8 @@ fn every_shared_model_round_trips_exactly_in_plain_glb() {
 
 #[test]
 fn every_shared_model_keeps_counts_and_bounds_when_compressed() {
-    for path in shared_models() {
-        let a = import_file(&path, &ImportOptions::default())
-            .expect("imports")
-            .mesh;
+    for (name, a) in shared_meshes() {
         let b = reimport(&a, true);
-        let name = path.display();
         assert_eq!(
             a.expanded_triangle_count(),
             b.expanded_triangle_count(),
@@ -439,14 +445,6 @@ fn extreme_transforms_export_without_overflow() {
     }
 }
 
-/// Plain export with submeshes sharing vertex runs (as aggregates are written).
-fn shared_runs() -> ExportOptions {
-    ExportOptions {
-        share_vertices: true,
-        ..ExportOptions::plain()
-    }
-}
-
 /// The `attributes` object of each mesh's primitive, in mesh order.
 fn primitive_attributes(json: &serde_json::Value) -> Vec<serde_json::Value> {
     json["meshes"]
@@ -474,13 +472,9 @@ fn index_types(json: &serde_json::Value) -> Vec<u64> {
 
 #[test]
 fn every_shared_model_round_trips_exactly_with_shared_vertex_runs() {
-    for path in shared_models() {
-        let a = import_file(&path, &ImportOptions::default())
-            .expect("imports")
-            .mesh;
-        let shared = export_glb(&a, &shared_runs()).expect("exports");
+    for (name, a) in shared_meshes() {
+        let shared = export_glb(&a, &ExportOptions::parts()).expect("exports");
         let alone = export_glb(&a, &ExportOptions::plain()).expect("exports");
-        let name = path.display();
         assert!(shared.len() <= alone.len(), "{name}: sharing grew the file");
         let b = import_bytes(&shared, Format::Glb, None, &ImportOptions::default())
             .expect("re-imports")
@@ -506,12 +500,8 @@ fn every_shared_model_keeps_its_geometry_as_an_aggregate_within_short_attribute_
     // positions and indices come back exactly, placements within the short rotations' error,
     // normals within about half a degree, UVs within half a step of 1/65535, and UVs outside
     // [0, 1] stay float, exact.
-    for path in shared_models() {
-        let a = import_file(&path, &ImportOptions::default())
-            .expect("imports")
-            .mesh;
+    for (name, a) in shared_meshes() {
         let b = reimport_with(&a, &ExportOptions::aggregate());
-        let name = path.display();
         assert_eq!(a.submeshes.len(), b.submeshes.len(), "{name}");
         for (sa, sb) in a.submeshes.iter().zip(&b.submeshes) {
             assert!(sa.positions == sb.positions, "{name}: positions differ");
@@ -567,7 +557,7 @@ fn submeshes_of_one_layout_share_one_run_of_vertex_accessors() {
             });
         }
     }
-    let glb = export_glb(&mesh, &shared_runs()).expect("exports");
+    let glb = export_glb(&mesh, &ExportOptions::parts()).expect("exports");
     let json = json_of(&glb);
     let attributes = primitive_attributes(&json);
     assert_eq!(attributes.len(), 4);
@@ -629,7 +619,7 @@ fn a_run_closes_before_it_would_pass_65535_vertices() {
             .collect(),
         ..Default::default()
     };
-    let glb = export_glb(&mesh, &shared_runs()).expect("exports");
+    let glb = export_glb(&mesh, &ExportOptions::parts()).expect("exports");
     let json = json_of(&glb);
     let attributes = primitive_attributes(&json);
     assert_eq!(attributes[0], attributes[1]);
