@@ -26,7 +26,9 @@ use horizon_atlas::TextureCache;
 
 use crate::budget::Display;
 use crate::error::AggregateError;
-use crate::generate::{generate_with, ExpandedPart, Handoff, NodeInput, PartKey, Placement};
+use crate::generate::{
+    generate_with, ExpandedPart, Handoff, NodeInput, PartKey, Placement, StageSeconds,
+};
 use crate::options::{AggregateOptions, AtlasPolicy, Method};
 use crate::source::ModelSource;
 use crate::store::{
@@ -38,8 +40,15 @@ use crate::store::{
 /// instead took 31 of the build's core-seconds.
 const TEXTURE_CACHE_BYTES: usize = 512 << 20;
 
-/// One node's outcome in a level: its entry (if any), its handoff (if built), whether built.
-type LevelResult = (NodeId, Option<AggregateEntry>, Option<Arc<Handoff>>, bool);
+/// One node's outcome in a level: its entry (if any), its handoff (if built), whether built,
+/// and the time its stages took (zero if reused).
+type LevelResult = (
+    NodeId,
+    Option<AggregateEntry>,
+    Option<Arc<Handoff>>,
+    bool,
+    StageSeconds,
+);
 
 /// Textures above which [`AtlasPolicy::Auto`] atlases (the paper's rule, section 7).
 pub const AUTO_ATLAS_TEXTURES: usize = 100;
@@ -103,6 +112,10 @@ pub struct BuildReport {
     /// Files of earlier builds that the new manifest no longer names, deleted.
     #[serde(default)]
     pub removed: Garbage,
+    /// The stages' times summed over the aggregates built (core-seconds: the nodes of a level
+    /// run in parallel).
+    #[serde(default)]
+    pub stages: StageSeconds,
 }
 
 /// One tree level of a rebuild.
@@ -116,6 +129,9 @@ pub struct LevelTime {
     pub built: usize,
     /// Wall time of the level.
     pub seconds: f64,
+    /// The stages' times summed over the level's aggregates built.
+    #[serde(default)]
+    pub stages: StageSeconds,
 }
 
 /// Builds (or reuses) the aggregate of every node of `bvh` into `store`.
@@ -205,13 +221,14 @@ pub fn build_aggregates(
                         done: done.load(Ordering::Relaxed),
                         total,
                     });
-                    return Ok((node, Some(e.clone()), None, false));
+                    return Ok((node, Some(e.clone()), None, false, StageSeconds::default()));
                 }
                 if let Some(limit) = options.stop_after {
                     if built_count.load(Ordering::SeqCst) >= limit {
                         return Err(AggregateError::Interrupted(limit));
                     }
                 }
+                let read = Instant::now();
                 let children = child_handoffs(
                     bvh,
                     node,
@@ -222,17 +239,24 @@ pub fn build_aggregates(
                     models,
                     options.aggregate.method,
                 );
+                let read_children = read.elapsed().as_secs_f64();
                 let input = node_input(bvh, node, children, &options.aggregate, atlas)?;
                 let outcome = generate_with(&input, models, &table, &options.aggregate, &textures)
-                    .and_then(|out| {
+                    .and_then(|mut out| {
+                        let encoding = Instant::now();
                         let parts = encode_parts(node.0, &out.handoff, models)?;
+                        out.stats.stages.read_children = read_children;
+                        out.stats.stages.parts = encoding.elapsed().as_secs_f64();
+                        let mut stages = out.stats.stages;
+                        let writing = Instant::now();
                         let entry = store.stage(
                             key.clone(),
                             &out.glb,
                             parts.as_ref().map(|(b, k)| (b.as_slice(), k.clone())),
                             out.stats,
                         )?;
-                        Ok((entry, out.handoff))
+                        stages.write = writing.elapsed().as_secs_f64();
+                        Ok((entry, out.handoff, stages))
                     });
                 built_count.fetch_add(1, Ordering::SeqCst);
                 done.fetch_add(1, Ordering::Relaxed);
@@ -243,16 +267,22 @@ pub fn build_aggregates(
                 match outcome {
                     // The baseline's handoffs are read back from their parts files, so a
                     // level never holds all of them at once.
-                    Ok((entry, handoff)) => {
+                    Ok((entry, handoff, stages)) => {
                         let keep = matches!(handoff, Handoff::Versions(_));
-                        Ok((node, Some(entry), keep.then(|| Arc::new(handoff)), true))
+                        Ok((
+                            node,
+                            Some(entry),
+                            keep.then(|| Arc::new(handoff)),
+                            true,
+                            stages,
+                        ))
                     }
                     Err(e @ AggregateError::Io { .. }) => Err(e),
                     Err(e) => {
                         if let Ok(mut f) = failed.lock() {
                             f.push((node.0, e.to_string()));
                         }
-                        Ok((node, None, None, true))
+                        Ok((node, None, None, true, StageSeconds::default()))
                     }
                 }
             })
@@ -269,8 +299,10 @@ pub fn build_aggregates(
             nodes: level.len(),
             ..LevelTime::default()
         };
-        for (node, entry, handoff, built) in results {
+        for (node, entry, handoff, built, stages) in results {
             level_time.built += usize::from(built);
+            level_time.stages.add(&stages);
+            report.stages.add(&stages);
             if let Some(e) = entry {
                 if built {
                     report.built += 1;

@@ -134,6 +134,93 @@ pub struct NodeStats {
     /// The largest footprint among them, pixels at the nearest display distance.
     #[serde(default)]
     pub detail_culled_pixels: f64,
+    /// Where the wall time went, stage by stage.
+    #[serde(default)]
+    pub stages: StageSeconds,
+}
+
+/// Wall time of one aggregate's stages, seconds: the pipeline of [`generate_with`] and the
+/// build's reading and writing around it (`build.rs`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct StageSeconds {
+    /// Reading the handoffs of children reused from the store (their parts files).
+    #[serde(default)]
+    pub read_children: f64,
+    /// Gathering versions, culling and loading the source models.
+    #[serde(default)]
+    pub gather: f64,
+    /// The dedup plan (Table 1).
+    #[serde(default)]
+    pub dedup: f64,
+    /// Merging into one instanced mesh.
+    #[serde(default)]
+    pub merge: f64,
+    /// IAS (or the baseline's QEM) and the handoff's versions.
+    #[serde(default)]
+    pub simplify: f64,
+    /// Detail culling.
+    #[serde(default)]
+    pub detail: f64,
+    /// The texture atlas.
+    #[serde(default)]
+    pub atlas: f64,
+    /// Merging co-placed submeshes, baking cheap instances and encoding the GLB.
+    #[serde(default)]
+    pub encode: f64,
+    /// Encoding the parts file.
+    #[serde(default)]
+    pub parts: f64,
+    /// Writing both files as the store's temporaries.
+    #[serde(default)]
+    pub write: f64,
+}
+
+impl StageSeconds {
+    /// The stages' names and times, in pipeline order.
+    pub fn named(&self) -> [(&'static str, f64); 10] {
+        [
+            ("read children", self.read_children),
+            ("gather", self.gather),
+            ("dedup", self.dedup),
+            ("merge", self.merge),
+            ("simplify", self.simplify),
+            ("detail", self.detail),
+            ("atlas", self.atlas),
+            ("encode", self.encode),
+            ("parts", self.parts),
+            ("write", self.write),
+        ]
+    }
+
+    /// Adds `other`'s times to these.
+    pub fn add(&mut self, other: &StageSeconds) {
+        self.read_children += other.read_children;
+        self.gather += other.gather;
+        self.dedup += other.dedup;
+        self.merge += other.merge;
+        self.simplify += other.simplify;
+        self.detail += other.detail;
+        self.atlas += other.atlas;
+        self.encode += other.encode;
+        self.parts += other.parts;
+        self.write += other.write;
+    }
+}
+
+/// Times consecutive stages: each [`Lap::lap`] returns the seconds since the previous one.
+struct Lap(Instant);
+
+impl Lap {
+    fn new() -> Self {
+        Self(Instant::now())
+    }
+
+    fn lap(&mut self) -> f64 {
+        let now = Instant::now();
+        let seconds = now.duration_since(self.0).as_secs_f64();
+        self.0 = now;
+        seconds
+    }
 }
 
 /// A built aggregate.
@@ -180,6 +267,7 @@ fn generate_optimized(
     textures: &TextureCache,
 ) -> Result<NodeOutput, AggregateError> {
     let start = Instant::now();
+    let mut lap = Lap::new();
     let mut stats = NodeStats {
         placements: input.placements.len(),
         budget: input.display.triangle_budget(options),
@@ -192,6 +280,7 @@ fn generate_optimized(
     stats.culled = input.placements.len() - kept.len();
     // Stage 3, dedup (section 5.1).
     let sources = load_models(kept.iter().map(|p| p.model), models)?;
+    stats.stages.gather = lap.lap();
     let replacements = if options.dedup {
         dedup_plan(input, &kept, &sources, table, options)
     } else {
@@ -205,6 +294,7 @@ fn generate_optimized(
             e.insert(models.model(r.by)?);
         }
     }
+    stats.stages.dedup = lap.lap();
     // Stage 4, merge: one submesh per drawn model submesh, one instance per placement and
     // model-internal instance.
     let mut merge = Merger::default();
@@ -251,6 +341,7 @@ fn generate_optimized(
     let material_keys = std::mem::take(&mut merge.material_keys);
     let merged = merge.mesh;
     stats.triangles_in = merged.expanded_triangle_count();
+    stats.stages.merge = lap.lap();
     // Stage 5, simplify with IAS to the budget.
     let (simplified, kept_parts) = if stats.triangles_in > stats.budget {
         let s = simplify(
@@ -291,12 +382,14 @@ fn generate_optimized(
             })
             .collect(),
     );
+    stats.stages.simplify = lap.lap();
     // Stage 6, detail culling: what IAS could not bring within the budget loses its smallest
     // instances (this aggregate only: the handoff above keeps every version).
     let (simplified, detail) =
         crate::detail::cull_to_budget(simplified, stats.budget, &input.display, options);
     stats.detail_culled = detail.instances;
     stats.detail_culled_pixels = detail.largest_pixels;
+    stats.stages.detail = lap.lap();
     // Stage 7, atlas (section 7) and encode.
     let out = if input.atlas {
         let atlas_options = AtlasOptions {
@@ -313,11 +406,13 @@ fn generate_optimized(
     } else {
         simplified
     };
+    stats.stages.atlas = lap.lap();
     // Stage 8, one draw per set of placements: parts placed alike (a model's submeshes,
     // one material after the atlas) merge, and cheap placements (single ones, tiny parts)
     // are baked into shared geometry.
     let out = out.merge_coplaced_submeshes().bake_cheap_instances();
     let mut out = finish(input.node, out, handoff, stats)?;
+    out.stats.stages.encode = lap.lap();
     out.stats.seconds = start.elapsed().as_secs_f64();
     Ok(out)
 }

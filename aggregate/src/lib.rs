@@ -36,6 +36,7 @@ pub use build::{
 pub use error::AggregateError;
 pub use generate::{
     generate, generate_with, ExpandedPart, Handoff, NodeInput, NodeOutput, NodeStats, Placement,
+    StageSeconds,
 };
 pub use options::{AggregateOptions, AtlasPolicy, Method};
 pub use source::{InMemoryModels, ModelSource, SourceModel};

@@ -11,7 +11,7 @@ use anyhow::Context;
 use glam::Vec3;
 use horizon_aggregate::{
     build_aggregates, AggregateManifest, AggregateOptions, AggregateStore, AtlasPolicy,
-    BuildOptions, BuildReport, InMemoryModels, Progress, SourceModel,
+    BuildOptions, BuildReport, InMemoryModels, LevelTime, Progress, SourceModel,
 };
 use horizon_bvh::{Bvh, CutItem, CutQuery};
 use horizon_mesh::{import_file, ImportOptions};
@@ -633,11 +633,68 @@ fn bench_markdown(r: &AggregateBench) -> String {
     s += "\n## Time per tree level\n\nRoot first. Built: aggregates built on the level (the \
           incremental rebuild reuses the rest).\n\n| depth | nodes | full: built | full: seconds \
           | incremental: built | incremental: seconds |\n|---|---|---|---|---|---|\n";
-    for (f, i) in r.full.level_times.iter().zip(&r.incremental.level_times) {
-        s += &format!(
-            "| {} | {} | {} | {:.2} | {} | {:.2} |\n",
-            f.depth, f.nodes, f.built, f.seconds, i.built, i.seconds
+    // Splits can give the incremental tree a level the full one lacks.
+    let depths = r
+        .full
+        .level_times
+        .len()
+        .max(r.incremental.level_times.len());
+    for depth in 0..depths {
+        let (f, i) = (
+            r.full.level_times.get(depth),
+            r.incremental.level_times.get(depth),
         );
+        let cell =
+            |l: Option<&LevelTime>, text: fn(&LevelTime) -> String| l.map_or("-".into(), text);
+        s += &format!(
+            "| {depth} | {} | {} | {} | {} | {} |\n",
+            cell(f.or(i), |l| l.nodes.to_string()),
+            cell(f, |l| l.built.to_string()),
+            cell(f, |l| format!("{:.2}", l.seconds)),
+            cell(i, |l| l.built.to_string()),
+            cell(i, |l| format!("{:.2}", l.seconds)),
+        );
+    }
+    s += &stage_tables(r);
+    s
+}
+
+/// Where the builds' time went: each stage's core-seconds summed over the aggregates built,
+/// for both builds, then the incremental one by depth.
+fn stage_tables(r: &AggregateBench) -> String {
+    let (full, inc) = (r.full.stages.named(), r.incremental.stages.named());
+    let mut s = String::from(
+        "\n## Time per stage\n\nCore-seconds summed over the aggregates built (the nodes of a \
+         level run in parallel, so these add up to more than the wall time).\n\n| stage | full \
+         | incremental | incremental / full |\n|---|---|---|---|\n",
+    );
+    for ((name, f), (_, i)) in full.iter().zip(&inc) {
+        s += &format!(
+            "| {name} | {f:.2} | {i:.2} | {:.1}% |\n",
+            100.0 * i / f.max(1e-9)
+        );
+    }
+    let (f, i): (f64, f64) = (
+        full.iter().map(|x| x.1).sum(),
+        inc.iter().map(|x| x.1).sum(),
+    );
+    s += &format!(
+        "| all | {f:.2} | {i:.2} | {:.1}% |\n",
+        100.0 * i / f.max(1e-9)
+    );
+    s += "\nThe incremental rebuild by depth, core-seconds:\n\n| depth | built |";
+    for (name, _) in &inc {
+        s += &format!(" {name} |");
+    }
+    s += "\n|---|---|";
+    s += &"---|".repeat(inc.len());
+    s += "\n";
+    for level in &r.incremental.level_times {
+        s += &format!("| {} | {} |", level.depth, level.built);
+        for (_, t) in level.stages.named() {
+            s += &format!(" {t:.2} |");
+        }
+        s += "\n";
     }
     s
 }
