@@ -107,8 +107,6 @@ fn could_match(a: f32, b: f32, z_cap: f32) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use glam::Vec3;
-    use horizon_mesh::{Instance, InstancedMesh, Submesh};
     use proptest::prelude::*;
 
     /// The plan without the norm bound: every representative's distances computed.
@@ -140,25 +138,7 @@ mod tests {
     }
 
     fn frame() -> PcaFrame {
-        let positions = vec![
-            Vec3::new(0.0, 0.0, 0.0),
-            Vec3::new(4.0, 0.0, 0.0),
-            Vec3::new(0.0, 2.0, 0.0),
-            Vec3::new(0.5, 0.3, 1.0),
-        ];
-        let mesh = InstancedMesh {
-            submeshes: vec![Submesh {
-                positions,
-                indices: vec![0, 2, 1, 0, 1, 3, 1, 2, 3, 2, 0, 3],
-                ..Submesh::default()
-            }],
-            instances: vec![Instance {
-                submesh: 0,
-                transform: Affine3A::IDENTITY,
-            }],
-            ..InstancedMesh::default()
-        };
-        PcaFrame::of(&mesh).expect("a solid has a frame")
+        PcaFrame::of(&crate::pca::tests::lump()).expect("a solid has a frame")
     }
 
     /// Descriptors in a few clusters: a base shape each, moved by up to `spread` per

@@ -190,13 +190,13 @@ fn mean_nearest(from: &[Vec3], t: &Affine3A, to: &[Vec3]) -> f32 {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use glam::Quat;
     use horizon_mesh::{Instance, Submesh};
 
     /// An irregular, asymmetric tetrahedron-ish solid, so the PCA axes are distinct.
-    fn lump() -> InstancedMesh {
+    pub(crate) fn lump() -> InstancedMesh {
         let positions = vec![
             Vec3::new(0.0, 0.0, 0.0),
             Vec3::new(4.0, 0.0, 0.0),
