@@ -104,6 +104,12 @@ impl Display {
         length / (self.distance.max(f64::MIN_POSITIVE) * pixel_solid_angle().sqrt())
     }
 
+    /// The length that spans `pixels` pixels seen face-on at the nearest display distance
+    /// (the inverse of [`Display::pixels_of_length`]).
+    pub fn length_of_pixels(&self, pixels: f64) -> f64 {
+        pixels * self.distance * pixel_solid_angle().sqrt()
+    }
+
     /// Atlas side: `texels_per_pixel` texels per covered pixel, a power of two in
     /// [`ATLAS_SIDE`].
     pub fn atlas_side(&self, options: &AggregateOptions) -> u32 {
@@ -143,6 +149,16 @@ mod tests {
         let big = Display::of(Vec3::ZERO, 100.0, 1.0, &o);
         assert!(big.triangle_budget(&o) > small.triangle_budget(&o));
         assert!(big.pixels <= 1920.0 * 1080.0 + 1.0);
+    }
+
+    #[test]
+    fn length_of_pixels_inverts_pixels_of_length() {
+        let o = AggregateOptions::default();
+        let d = Display::of(Vec3::ZERO, 30.0, 2.0, &o);
+        for px in [0.125, 1.0, 40.0] {
+            let back = d.pixels_of_length(d.length_of_pixels(px));
+            assert!((back - px).abs() < 1e-9 * px, "{px} -> {back}");
+        }
     }
 
     #[test]

@@ -5,7 +5,7 @@
 //! placements that cost less written out than instanced into one submesh
 //! (`InstancedMesh::merge_coplaced_submeshes`, `bake_cheap_instances`: fewer draw calls and
 //! less JSON), encode (`ExportOptions::aggregate`: vertices shared in runs, 8-bit normals,
-//! 16-bit UVs and instance rotations).
+//! 16-bit UVs and instance rotations, 16-bit positions within [`POSITION_PIXELS`]).
 //!
 //! What a node hands its parent ([`Handoff`]) is not its final GLB but the simplified
 //! version of every model submesh it drew, in model space. The parent then instances one
@@ -411,7 +411,7 @@ fn generate_optimized(
     // one material after the atlas) merge, and cheap placements (single ones, tiny parts)
     // are baked into shared geometry.
     let out = out.merge_coplaced_submeshes().bake_cheap_instances();
-    let mut out = finish(input.node, out, handoff, stats)?;
+    let mut out = finish(input, out, handoff, stats)?;
     out.stats.stages.encode = lap.lap();
     out.stats.seconds = start.elapsed().as_secs_f64();
     Ok(out)
@@ -477,21 +477,31 @@ fn generate_unoptimized(
         },
         material_keys,
     }));
-    let mut out = finish(input.node, simplified, handoff, stats)?;
+    let mut out = finish(input, simplified, handoff, stats)?;
     out.stats.seconds = start.elapsed().as_secs_f64();
     Ok(out)
 }
 
+/// How far, in pixels at the nearest display distance, storing an aggregate's positions as
+/// 16-bit integers may move a vertex (`ExportOptions::position_tolerance`). An eighth of a
+/// pixel is under the 8-bit normals' shading change and far under IAS's own error (median
+/// 0.66 px on the village, `budget.rs`); a run it refuses keeps float positions.
+pub const POSITION_PIXELS: f64 = 0.125;
+
 /// Encodes the aggregate and fills in its counts.
 fn finish(
-    node: u32,
+    input: &NodeInput,
     mesh: InstancedMesh,
     handoff: Handoff,
     mut stats: NodeStats,
 ) -> Result<NodeOutput, AggregateError> {
-    let glb = export_glb(&mesh, &ExportOptions::aggregate()).map_err(|e| AggregateError::Glb {
-        node,
-        reason: e.to_string(),
+    let node = input.node;
+    let tolerance = input.display.length_of_pixels(POSITION_PIXELS) as f32;
+    let glb = export_glb(&mesh, &ExportOptions::aggregate(tolerance)).map_err(|e| {
+        AggregateError::Glb {
+            node,
+            reason: e.to_string(),
+        }
     })?;
     stats.triangles_out = mesh.expanded_triangle_count();
     stats.unique_triangles = mesh.unique_triangle_count();

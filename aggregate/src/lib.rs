@@ -36,7 +36,7 @@ pub use build::{
 pub use error::AggregateError;
 pub use generate::{
     generate, generate_with, ExpandedPart, Handoff, NodeInput, NodeOutput, NodeStats, Placement,
-    StageSeconds,
+    StageSeconds, POSITION_PIXELS,
 };
 pub use options::{AggregateOptions, AtlasPolicy, Method};
 pub use source::{InMemoryModels, ModelSource, SourceModel};
@@ -55,5 +55,7 @@ pub use store::{AggregateEntry, AggregateManifest, AggregateStore, Garbage};
 /// normals as 8-bit and UVs as 16-bit normalized integers (`ExportOptions::short_attributes`,
 /// KHR_mesh_quantization), 20 bytes a vertex instead of 32. 10: shrunk charts are baked
 /// trilinearly from the source's mip chain instead of by a box of at most 3 x 3 bilinear
-/// samples (`horizon_atlas`'s `bake.rs`).
-pub const FORMAT: u32 = 10;
+/// samples (`horizon_atlas`'s `bake.rs`). 11: positions as 16-bit integers over each vertex
+/// run's box wherever that moves no vertex by more than an eighth of a pixel
+/// ([`POSITION_PIXELS`]), 16 bytes a vertex instead of 20.
+pub const FORMAT: u32 = 11;

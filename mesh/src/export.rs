@@ -12,12 +12,20 @@
 //! run), and each primitive indexes its part of the run with its own 16-bit index accessor,
 //! as glTF allows; readers that want a primitive alone drop the vertices it does not index
 //! (ours does, in import). With `short_attributes` (aggregates too) normals are 8-bit and
-//! UVs and colours 16-bit normalized integers (KHR_mesh_quantization) while positions stay
-//! float, so shared runs need no common quantisation grid.
+//! UVs and colours 16-bit normalized integers (KHR_mesh_quantization). With
+//! `position_tolerance` (aggregates, format 11) a run's positions are 16-bit integers over the
+//! run's box, where that keeps every placed vertex within the tolerance in world space (else
+//! float).
+//!
+//! Quantized positions are mapped back by one dequantisation per run, an offset and a uniform
+//! step. A GPU-instanced node carries the step as its own uniform scale and each instance's
+//! translation absorbs the offset, so the instances' rotations and scales are written
+//! unchanged (and an identity stream stays left out); a node with a matrix takes the whole
+//! dequantisation into its matrix.
 //!
 //! With compression (the approach of meshoptimizer's gltfpack): indices are optimised for the
-//! vertex cache and vertices for fetch order; positions become 16-bit integers whose
-//! dequantisation (offset and uniform scale) is folded into each instance transform, normals
+//! vertex cache and vertices for fetch order; positions become 16-bit integers over each
+//! submesh's box (dequantised as above, whatever the tolerance), normals
 //! 8-bit, UVs in [0, 1] and colours 16-bit (KHR_mesh_quantization); every vertex, index and
 //! instance stream is then meshopt-encoded (EXT_meshopt_compression, with a fallback buffer).
 
@@ -31,7 +39,7 @@ use crate::model::{AlphaMode, InstancedMesh, Material, Submesh, Texture, Wrap};
 use crate::transform::{decompose_svd, decompose_trs, Trs};
 
 /// Options for [`export_glb`].
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct ExportOptions {
     /// Quantize and meshopt-encode geometry (lossy for positions at 16 bits per axis).
     pub compress: bool,
@@ -48,6 +56,11 @@ pub struct ExportOptions {
     /// (KHR_mesh_quantization), positions still float: 20 bytes a vertex instead of 32, normals
     /// within about 0.5 degrees. Compression always does this (and quantizes positions too).
     pub short_attributes: bool,
+    /// Positions as unsigned 16-bit integers over each vertex run's box (KHR_mesh_quantization),
+    /// 8 bytes a vertex instead of 12, for every run whose rounding keeps each of its vertices,
+    /// in every placement, within this distance (world units) of where it was; the other runs
+    /// keep float positions. `None`: float positions (unless compressing).
+    pub position_tolerance: Option<f32>,
 }
 
 impl ExportOptions {
@@ -58,6 +71,7 @@ impl ExportOptions {
             short_rotations: false,
             share_vertices: false,
             short_attributes: false,
+            position_tolerance: None,
         }
     }
 
@@ -68,6 +82,7 @@ impl ExportOptions {
             short_rotations: true,
             share_vertices: false,
             short_attributes: true,
+            position_tolerance: None,
         }
     }
 
@@ -80,14 +95,16 @@ impl ExportOptions {
         }
     }
 
-    /// What aggregates are written as, seen from afar and made mostly of instances: float
-    /// positions, short normals, UVs and instance rotations, vertices shared in runs.
-    pub fn aggregate() -> Self {
+    /// What aggregates are written as, seen from afar and made mostly of instances: short
+    /// normals, UVs and instance rotations, vertices shared in runs, and positions 16-bit
+    /// wherever that keeps them within `position_tolerance` (world units) of their place.
+    pub fn aggregate(position_tolerance: f32) -> Self {
         Self {
             compress: false,
             short_rotations: true,
             share_vertices: true,
             short_attributes: true,
+            position_tolerance: Some(position_tolerance),
         }
     }
 }
@@ -99,24 +116,36 @@ pub fn export_glb(mesh: &InstancedMesh, options: &ExportOptions) -> Result<Vec<u
     let mut w = GlbWriter::new(*options);
     // Stage 2: geometry, one glTF mesh per submesh, its vertices in a run of their own or one
     // shared with other submeshes; remember each dequantisation transform.
-    let by_submesh = mesh.instances_by_submesh();
+    let placed: Vec<Vec<Affine3A>> = mesh
+        .instances_by_submesh()
+        .iter()
+        .map(|ks| ks.iter().map(|&k| mesh.instances[k].transform).collect())
+        .collect();
     let share = options.share_vertices && !options.compress;
-    let (runs, run_of) = vertex_runs(&mesh.submeshes, share);
+    let reach: Option<Vec<f32>> = options
+        .position_tolerance
+        .filter(|_| share)
+        .map(|tolerance| {
+            placed
+                .iter()
+                .map(|p| Dequantize::reach(p, tolerance))
+                .collect()
+        });
+    let (runs, run_of) = vertex_runs(&mesh.submeshes, share, reach.as_deref());
     let mut written: Vec<Option<SharedRun>> = (0..runs.len()).map(|_| None).collect();
     let mut dequantize = Vec::with_capacity(mesh.submeshes.len());
     for (s, sub) in mesh.submeshes.iter().enumerate() {
         let (run, at) = run_of[s];
         if runs[run].len() == 1 {
-            let transforms: Vec<Affine3A> = by_submesh[s]
-                .iter()
-                .map(|&k| mesh.instances[k].transform)
-                .collect();
-            dequantize.push(w.write_submesh(sub, &transforms)?);
+            dequantize.push(w.write_submesh(sub, &placed[s])?);
             continue;
         }
         // A shared run's vertices are written when its first submesh comes, in run order.
         if written[run].is_none() {
-            let members: Vec<&Submesh> = runs[run].iter().map(|&m| &mesh.submeshes[m]).collect();
+            let members: Vec<(&Submesh, &[Affine3A])> = runs[run]
+                .iter()
+                .map(|&m| (&mesh.submeshes[m], placed[m].as_slice()))
+                .collect();
             written[run] = Some(w.write_shared_vertices(&members)?);
         }
         let shared = written[run].as_ref().expect("written above");
@@ -126,7 +155,7 @@ pub fn export_glb(mesh: &InstancedMesh, options: &ExportOptions) -> Result<Vec<u
             shared.count,
             sub.material,
         )?;
-        dequantize.push(Affine3A::IDENTITY);
+        dequantize.push(shared.dequantize);
     }
     // Stage 3: textures and materials.
     w.write_textures(&mesh.textures);
@@ -134,7 +163,7 @@ pub fn export_glb(mesh: &InstancedMesh, options: &ExportOptions) -> Result<Vec<u
         w.write_material(m);
     }
     // Stage 4: nodes, GPU-instanced where every instance of a submesh is TRS.
-    w.write_nodes(mesh, &dequantize)?;
+    w.write_nodes(&placed, &dequantize)?;
     // Stage 5: the JSON document and the GLB container.
     w.finish()
 }
@@ -158,6 +187,74 @@ enum Encoding<'a> {
         vertex_count: usize,
     },
 }
+
+/// How stored positions map back to model space: `offset + step * stored`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Dequantize {
+    offset: Vec3,
+    step: f32,
+}
+
+impl Dequantize {
+    /// Float positions, stored as they are.
+    const NONE: Self = Self {
+        offset: Vec3::ZERO,
+        step: 1.0,
+    };
+
+    fn affine(&self) -> Affine3A {
+        Affine3A::from_scale_rotation_translation(
+            Vec3::splat(self.step),
+            Quat::IDENTITY,
+            self.offset,
+        )
+    }
+
+    /// The translation of an instance placed by `trs` under a node scaled by the step (see
+    /// the module docs): where it puts stored position zero, in units of the step. The offset
+    /// is turned by `rotation`, the instance's rotation as a reader will decode it, so that
+    /// rounding the rotation turns the vertices about the instance's origin exactly as it does
+    /// with float positions, and moves them no further.
+    fn instance_translation(&self, trs: &Trs, rotation: Quat) -> Vec3 {
+        (trs.translation + rotation * (trs.scale * self.offset)) / self.step
+    }
+
+    /// Whether placing these stored positions by `placed` stays finite both ways they are
+    /// written (a node matrix, or an instance under a scaled node), and keeps every vertex
+    /// within `tolerance` of its place in every placement. Rounding moves a stored position by
+    /// at most half a step on each axis, which a placement stretches by at most its largest
+    /// axis scale.
+    fn fits(&self, placed: &[Affine3A], tolerance: f32) -> bool {
+        let rounding = ROUNDING * self.step;
+        self.affine().is_finite()
+            && placed.iter().all(|t| {
+                (*t * self.affine()).is_finite()
+                    && (t.transform_point3(self.offset) / self.step).is_finite()
+                    && rounding * crate::transform::max_axis_scale(t) <= tolerance
+            })
+    }
+
+    /// The largest box extent whose 16-bit step keeps positions placed by `placed` within
+    /// `tolerance` ([`Dequantize::fits`]' bound, solved for the extent; unbounded for a
+    /// submesh placed nowhere).
+    fn reach(placed: &[Affine3A], tolerance: f32) -> f32 {
+        let scale = placed
+            .iter()
+            .map(crate::transform::max_axis_scale)
+            .fold(0.0f32, f32::max);
+        if scale > 0.0 {
+            // The step is rounded up by under a tenth (`short_step`).
+            tolerance / (ROUNDING * scale) * STEPS / 1.1
+        } else {
+            f32::INFINITY
+        }
+    }
+}
+
+/// Steps of a 16-bit quantisation grid across its box.
+const STEPS: f32 = 65535.0;
+/// Rounding to the grid moves a position by at most this many steps (half a step per axis).
+const ROUNDING: f32 = 0.866_025_4;
 
 /// A vertex attribute ready to write: tightly packed elements of `stride` bytes.
 struct Attribute {
@@ -192,8 +289,11 @@ struct GlbWriter {
     short_rotations: bool,
     /// Normals, UVs and colours as normalized integers (`short_attributes`, or compressing).
     short_attributes: bool,
-    /// Whether an attribute was written as normalized integers (KHR_mesh_quantization).
+    /// Whether an attribute was written as integers (KHR_mesh_quantization).
     quantized: bool,
+    /// The largest distance a quantized position may move (`ExportOptions::position_tolerance`;
+    /// unbounded when compressing, `None` for float positions).
+    position_tolerance: Option<f32>,
     pools: Vec<Pool>,
     /// The GLB binary chunk (buffer 0).
     bin: Vec<u8>,
@@ -212,30 +312,51 @@ struct GlbWriter {
     extensions_required: BTreeSet<&'static str>,
 }
 
-/// The vertex accessors of a shared run, and where each member's vertices start in them.
+/// The vertex accessors of a shared run, where each member's vertices start in them, and how
+/// its positions map back to model space.
 struct SharedRun {
     attributes: Map<String, Value>,
     bases: Vec<u32>,
     count: usize,
+    dequantize: Dequantize,
 }
 
 /// Most vertices in a shared run: every index into it stays 16-bit.
 const RUN_VERTICES: usize = 65_535;
 
-/// Which submeshes write their vertices together: with `share`, consecutive submeshes of one
-/// attribute layout (normals, UVs, colours present or not) fill a run until the next would take
-/// it past [`RUN_VERTICES`]; a submesh that alone exceeds it, and every submesh without
+/// Which submeshes write their vertices together: with `share`, submeshes of one attribute
+/// layout (normals, UVs, colours present or not) fill a run until the next would take it past
+/// [`RUN_VERTICES`], or, with `reach` (quantized positions), past the box extent a member
+/// tolerates; a submesh that alone exceeds the vertex limit, and every submesh without
 /// `share`, has a run of its own. Returns the runs (submesh numbers in order) and, for each
 /// submesh, its run and its place in it.
 ///
 /// A submesh in its own run costs three or four accessors more than one sharing a run (a
 /// position accessor with its bounds, normals, UVs): on an aggregate of many small instanced
 /// submeshes that was a third of the JSON, and the JSON a fifth of the file.
-fn vertex_runs(submeshes: &[Submesh], share: bool) -> (Vec<Vec<usize>>, Vec<(usize, usize)>) {
+///
+/// `reach[s]` is the largest box extent over which submesh `s`'s positions can be quantized
+/// within the tolerance (see [`Dequantize::fits`]). An aggregate mixes parts in model space,
+/// a metre or two across, with geometry baked in world space a kilometre from the origin; one
+/// run over both would round the small parts by centimetres, so a submesh joins the first open
+/// run of its layout whose box, grown by its own, stays within every member's reach. A run
+/// full of vertices closes; with every reach unbounded this is one open run per layout.
+fn vertex_runs(
+    submeshes: &[Submesh],
+    share: bool,
+    reach: Option<&[f32]>,
+) -> (Vec<Vec<usize>>, Vec<(usize, usize)>) {
+    /// A run still taking members: its number, vertices, box and the least reach among them.
+    struct Open {
+        run: usize,
+        count: usize,
+        lo: Vec3,
+        hi: Vec3,
+        reach: f32,
+    }
     let mut runs: Vec<Vec<usize>> = Vec::new();
     let mut run_of = Vec::with_capacity(submeshes.len());
-    // Per layout, the run still open and its vertex count.
-    let mut open: BTreeMap<(bool, bool, bool), (usize, usize)> = BTreeMap::new();
+    let mut open: BTreeMap<(bool, bool, bool), Vec<Open>> = BTreeMap::new();
     for (s, sub) in submeshes.iter().enumerate() {
         let n = sub.positions.len();
         let layout = (
@@ -243,20 +364,46 @@ fn vertex_runs(submeshes: &[Submesh], share: bool) -> (Vec<Vec<usize>>, Vec<(usi
             sub.uvs.is_some(),
             sub.colors.is_some(),
         );
-        let joins = share
-            && open
-                .get(&layout)
-                .is_some_and(|&(_, count)| count + n <= RUN_VERTICES);
-        if joins {
-            let (run, count) = open.get_mut(&layout).expect("checked above");
-            *count += n;
-            run_of.push((*run, runs[*run].len()));
-            runs[*run].push(s);
+        let (lo, hi) = sub
+            .positions
+            .iter()
+            .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), p| {
+                (lo.min(*p), hi.max(*p))
+            });
+        let own_reach = reach.map_or(f32::INFINITY, |r| r[s]);
+        let candidates = open.entry(layout).or_default();
+        let fits_box = |o: &Open| {
+            let extent = (o.hi.max(hi) - o.lo.min(lo)).max_element();
+            n == 0 || extent <= o.reach.min(own_reach)
+        };
+        let joined = share
+            .then(|| {
+                candidates
+                    .iter()
+                    .position(|o| o.count + n <= RUN_VERTICES && fits_box(o))
+            })
+            .flatten();
+        if let Some(k) = joined {
+            let o = &mut candidates[k];
+            o.count += n;
+            o.lo = o.lo.min(lo);
+            o.hi = o.hi.max(hi);
+            o.reach = o.reach.min(own_reach);
+            run_of.push((o.run, runs[o.run].len()));
+            runs[o.run].push(s);
         } else {
             runs.push(vec![s]);
             run_of.push((runs.len() - 1, 0));
             if share && n <= RUN_VERTICES {
-                open.insert(layout, (runs.len() - 1, n));
+                // Runs this one's vertices would overflow are as good as full.
+                candidates.retain(|o| o.count + n <= RUN_VERTICES);
+                candidates.push(Open {
+                    run: runs.len() - 1,
+                    count: n,
+                    lo,
+                    hi,
+                    reach: own_reach,
+                });
             }
         }
     }
@@ -270,6 +417,11 @@ impl GlbWriter {
             short_rotations: options.short_rotations,
             short_attributes: options.compress || options.short_attributes,
             quantized: false,
+            position_tolerance: if options.compress {
+                Some(f32::INFINITY)
+            } else {
+                options.position_tolerance
+            },
             pools: Vec::new(),
             bin: Vec::new(),
             fallback_len: 0,
@@ -427,9 +579,13 @@ impl GlbWriter {
         Ok(self.add_accessor(view, a))
     }
 
-    /// Writes one submesh as a glTF mesh and returns the transform that maps its stored
-    /// positions back to model space (identity unless positions were quantized).
-    fn write_submesh(&mut self, s: &Submesh, placed: &[Affine3A]) -> Result<Affine3A, ExportError> {
+    /// Writes one submesh as a glTF mesh and returns how its stored positions map back to model
+    /// space.
+    fn write_submesh(
+        &mut self,
+        s: &Submesh,
+        placed: &[Affine3A],
+    ) -> Result<Dequantize, ExportError> {
         // Stage 1: vertex order; compression optimises for the vertex cache and fetch.
         let (indices, order) = if self.compress {
             optimise_order(s)
@@ -437,30 +593,49 @@ impl GlbWriter {
             (s.indices.clone(), (0..s.positions.len() as u32).collect())
         };
         let n = order.len();
-        // Stage 2: attributes, quantized when compressing.
-        let quantized = self
-            .compress
-            .then(|| quantize_positions(s, &order))
-            .filter(|(_, d)| {
-                // Folding the dequantisation into an extreme instance transform may overflow f32;
-                // such a submesh keeps float positions.
-                d.is_finite() && placed.iter().all(|t| (*t * *d).is_finite())
-            });
-        let (position, dequantize) = quantized.unwrap_or_else(|| {
-            (
-                float_attribute(
-                    order.iter().map(|&v| s.positions[v as usize].to_array()),
-                    true,
-                ),
-                Affine3A::IDENTITY,
-            )
-        });
+        // Stage 2: attributes, positions quantized where the tolerance allows.
         let mut attributes = Map::new();
-        let p = self.write_attribute(&position, Some(ARRAY_BUFFER))?;
-        attributes.insert("POSITION".into(), json!(p));
+        let dequantize = self.write_positions(&[(s, &order, placed)], &mut attributes)?;
         self.write_other_attributes(&[(s, &order)], &mut attributes)?;
         // Stage 3: indices and the primitive.
         self.write_primitive(attributes, indices, n, s.material)?;
+        Ok(dequantize)
+    }
+
+    /// POSITION of `parts` (one run; each submesh's vertices in the order given, placed by its
+    /// transforms), one accessor over all of them: 16-bit integers over the run's box where
+    /// that keeps every placed vertex within the tolerance and the dequantisation folds into
+    /// every placement without overflowing f32, else floats. Returns the dequantisation.
+    fn write_positions(
+        &mut self,
+        parts: &[(&Submesh, &[u32], &[Affine3A])],
+        attributes: &mut Map<String, Value>,
+    ) -> Result<Dequantize, ExportError> {
+        let positions = || {
+            parts
+                .iter()
+                .flat_map(|&(m, order, _)| order.iter().map(|&v| m.positions[v as usize]))
+        };
+        let quantized = self
+            .position_tolerance
+            .map(|tolerance| (quantize_positions(positions), tolerance))
+            .filter(|((_, d), tolerance)| {
+                parts
+                    .iter()
+                    .all(|&(_, _, placed)| d.fits(placed, *tolerance))
+            });
+        let (position, dequantize) = match quantized {
+            Some((q, _)) => {
+                self.quantized = true;
+                q
+            }
+            None => (
+                float_attribute(positions().map(|p| p.to_array()), true),
+                Dequantize::NONE,
+            ),
+        };
+        let p = self.write_attribute(&position, Some(ARRAY_BUFFER))?;
+        attributes.insert("POSITION".into(), json!(p));
         Ok(dequantize)
     }
 
@@ -521,34 +696,37 @@ impl GlbWriter {
         }
     }
 
-    /// The vertex attributes of `members` (one layout), concatenated into one accessor each
-    /// (positions float), and where each member's vertices start.
-    fn write_shared_vertices(&mut self, members: &[&Submesh]) -> Result<SharedRun, ExportError> {
+    /// The vertex attributes of `members` (one layout, each with its placements), concatenated
+    /// into one accessor each, where each member's vertices start, and the run's
+    /// dequantisation.
+    fn write_shared_vertices(
+        &mut self,
+        members: &[(&Submesh, &[Affine3A])],
+    ) -> Result<SharedRun, ExportError> {
         let mut bases = Vec::with_capacity(members.len());
         let mut count = 0u32;
-        for m in members {
+        for (m, _) in members {
             bases.push(count);
             count += m.positions.len() as u32;
         }
         let orders: Vec<Vec<u32>> = members
             .iter()
-            .map(|m| (0..m.positions.len() as u32).collect())
+            .map(|(m, _)| (0..m.positions.len() as u32).collect())
             .collect();
-        let parts: Vec<(&Submesh, &[u32])> = members
+        let placed: Vec<(&Submesh, &[u32], &[Affine3A])> = members
             .iter()
             .zip(&orders)
-            .map(|(&m, order)| (m, order.as_slice()))
+            .map(|(&(m, placed), order)| (m, order.as_slice(), placed))
             .collect();
+        let parts: Vec<(&Submesh, &[u32])> = placed.iter().map(|&(m, o, _)| (m, o)).collect();
         let mut attributes = Map::new();
-        let positions = members.iter().flat_map(|m| m.positions.iter());
-        let position = float_attribute(positions.map(|p| p.to_array()), true);
-        let p = self.write_attribute(&position, Some(ARRAY_BUFFER))?;
-        attributes.insert("POSITION".into(), json!(p));
+        let dequantize = self.write_positions(&placed, &mut attributes)?;
         self.write_other_attributes(&parts, &mut attributes)?;
         Ok(SharedRun {
             attributes,
             bases,
             count: count as usize,
+            dequantize,
         })
     }
 
@@ -671,29 +849,37 @@ impl GlbWriter {
         self.materials.push(Value::Object(out));
     }
 
+    /// The nodes placing submesh `s` by `placed[s]`, its stored positions mapped back by
+    /// `dequantize[s]`: one GPU-instanced node scaled by the step, or matrix nodes.
     fn write_nodes(
         &mut self,
-        mesh: &InstancedMesh,
-        dequantize: &[Affine3A],
+        placed: &[Vec<Affine3A>],
+        dequantize: &[Dequantize],
     ) -> Result<(), ExportError> {
-        for (s, instances) in mesh.instances_by_submesh().iter().enumerate() {
-            let world: Vec<Affine3A> = instances
-                .iter()
-                .map(|&k| mesh.instances[k].transform * dequantize[s])
-                .collect();
-            if !world.iter().all(Affine3A::is_finite) {
-                // write_submesh leaves a submesh unquantised when folding would overflow, so
-                // this needs an instance transform that was not finite to begin with.
+        for (s, (placed, d)) in placed.iter().zip(dequantize).enumerate() {
+            // The positions are quantized only where both forms below stay finite, so this
+            // needs an instance transform that was not finite to begin with.
+            if !placed.iter().all(Affine3A::is_finite) {
                 return Err(ExportError::Encode(format!(
                     "submesh {s}: transform overflows f32"
                 )));
             }
-            let all_trs: Option<Vec<Trs>> = world.iter().map(decompose_trs).collect();
+            let all_trs: Option<Vec<Trs>> = placed.iter().map(decompose_trs).collect();
             match all_trs {
-                Some(trs) if trs.len() >= 2 => self.write_gpu_instanced_node(s, &trs)?,
+                Some(mut trs) if trs.len() >= 2 => {
+                    for x in &mut trs {
+                        let read = if self.short_rotations {
+                            read_back_rotation(x.rotation)
+                        } else {
+                            x.rotation
+                        };
+                        x.translation = d.instance_translation(x, read);
+                    }
+                    self.write_gpu_instanced_node(s, &trs, d.step)?;
+                }
                 _ => {
-                    for w in &world {
-                        self.write_matrix_node(s, w);
+                    for t in placed {
+                        self.write_matrix_node(s, &(*t * d.affine()));
                     }
                 }
             }
@@ -701,7 +887,14 @@ impl GlbWriter {
         Ok(())
     }
 
-    fn write_gpu_instanced_node(&mut self, mesh: usize, trs: &[Trs]) -> Result<(), ExportError> {
+    /// One node drawing `mesh` at every transform of `trs`, itself scaled by `scale` (the
+    /// positions' dequantisation step; 1 for float positions).
+    fn write_gpu_instanced_node(
+        &mut self,
+        mesh: usize,
+        trs: &[Trs],
+        scale: f32,
+    ) -> Result<(), ExportError> {
         self.extensions_used.insert("EXT_mesh_gpu_instancing");
         // Every attribute is optional: a rotation or scale that is the identity for every
         // instance (to float precision) is left out.
@@ -724,10 +917,16 @@ impl GlbWriter {
             let s = float_attribute(trs.iter().map(|x| x.scale.to_array()), false);
             attributes.insert("SCALE".into(), json!(self.write_attribute(&s, None)?));
         }
-        self.nodes.push(json!({
-            "mesh": mesh,
-            "extensions": {"EXT_mesh_gpu_instancing": {"attributes": attributes}},
-        }));
+        let mut node = Map::new();
+        node.insert("mesh".into(), json!(mesh));
+        if scale != 1.0 {
+            node.insert("scale".into(), numbers(&[scale; 3]));
+        }
+        node.insert(
+            "extensions".into(),
+            json!({"EXT_mesh_gpu_instancing": {"attributes": attributes}}),
+        );
+        self.nodes.push(Value::Object(node));
         self.roots.push(self.nodes.len() - 1);
         Ok(())
     }
@@ -989,25 +1188,41 @@ fn norm16_attribute<const N: usize>(
     }
 }
 
-/// Positions as unsigned 16-bit integers over the submesh's box, with one scale for all axes
-/// so that folding the dequantisation into a TRS instance keeps it TRS.
-fn quantize_positions(s: &Submesh, order: &[u32]) -> (Attribute, Affine3A) {
+/// A rotation as a reader decodes it from normalized 16-bit integers ([`norm16_attribute`]):
+/// each component rounded to a multiple of 1/32767, the whole normalised again.
+fn read_back_rotation(q: Quat) -> Quat {
+    let round = |x: f32| f32::from(meshopt::quantize_snorm(x, 16) as i16) / 32767.0;
+    let back = Vec4::new(round(q.x), round(q.y), round(q.z), round(q.w));
+    back.try_normalize().map_or(q, Quat::from_vec4)
+}
+
+/// Positions as unsigned 16-bit integers over their box, with one step for all axes so that
+/// the dequantisation is a uniform scale (which a TRS node or instance can carry).
+fn quantize_positions<I: Iterator<Item = Vec3>>(
+    positions: impl Fn() -> I,
+) -> (Attribute, Dequantize) {
     let mut min = Vec3::splat(f32::INFINITY);
     let mut max = Vec3::splat(f32::NEG_INFINITY);
-    for &v in order {
-        min = min.min(s.positions[v as usize]);
-        max = max.max(s.positions[v as usize]);
+    let mut count = 0;
+    for p in positions() {
+        min = min.min(p);
+        max = max.max(p);
+        count += 1;
     }
-    if order.is_empty() {
+    if count == 0 {
         (min, max) = (Vec3::ZERO, Vec3::ZERO);
     }
     let extent = (max - min).max_element();
-    let step = if extent > 0.0 { extent / 65535.0 } else { 1.0 };
-    let mut bytes = Vec::with_capacity(order.len() * 8);
+    let step = if extent > 0.0 {
+        short_step(extent / STEPS)
+    } else {
+        1.0
+    };
+    let mut bytes = Vec::with_capacity(count * 8);
     let mut lo = [u16::MAX; 3];
     let mut hi = [0u16; 3];
-    for &v in order {
-        let q = ((s.positions[v as usize] - min) / step).round();
+    for p in positions() {
+        let q = ((p - min) / step).round();
         for c in 0..3 {
             let x = q[c].clamp(0.0, 65535.0) as u16;
             lo[c] = lo[c].min(x);
@@ -1017,7 +1232,7 @@ fn quantize_positions(s: &Submesh, order: &[u32]) -> (Attribute, Affine3A) {
         // Vertex attributes must start on 4-byte boundaries, so pad each element to 8 bytes.
         bytes.extend_from_slice(&[0, 0]);
     }
-    let bounds = (!order.is_empty()).then(|| {
+    let bounds = (count > 0).then(|| {
         (
             lo.iter().map(|&x| f32::from(x)).collect(),
             hi.iter().map(|&x| f32::from(x)).collect(),
@@ -1029,13 +1244,28 @@ fn quantize_positions(s: &Submesh, order: &[u32]) -> (Attribute, Affine3A) {
         component_type: UNSIGNED_SHORT,
         normalized: false,
         type_name: "VEC3",
-        count: order.len(),
+        count,
         bounds,
     };
-    (
-        attribute,
-        Affine3A::from_scale_rotation_translation(Vec3::splat(step), glam::Quat::IDENTITY, min),
-    )
+    (attribute, Dequantize { offset: min, step })
+}
+
+/// The least number of two significant decimal digits at or above `step` (which it exceeds
+/// by under a tenth): every GPU-instanced node of a quantized run carries the step as its
+/// scale, and "0.000016" is a third of the JSON of "1.5259021896696422e-5".
+fn short_step(step: f32) -> f32 {
+    let exponent = step.log10().floor() as i32 - 1;
+    let unit = 10f64.powi(exponent);
+    let mut short = ((f64::from(step) / unit).ceil() * unit) as f32;
+    // Rounding to f32 can land just under; the next f32 up is at or above.
+    while short < step {
+        short = f32::from_bits(short.to_bits() + 1);
+    }
+    if short.is_finite() {
+        short
+    } else {
+        step
+    }
 }
 
 fn type_name(n: usize) -> &'static str {

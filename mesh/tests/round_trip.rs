@@ -497,11 +497,15 @@ fn every_shared_model_round_trips_exactly_with_shared_vertex_runs() {
 #[test]
 fn every_shared_model_keeps_its_geometry_as_an_aggregate_within_short_attribute_error() {
     // Aggregates write normals as 8-bit and UVs in [0, 1] as 16-bit normalized integers:
-    // positions and indices come back exactly, placements within the short rotations' error,
-    // normals within about half a degree, UVs within half a step of 1/65535, and UVs outside
-    // [0, 1] stay float, exact.
+    // with float positions, positions and indices come back exactly, placements within the
+    // short rotations' error, normals within about half a degree, UVs within half a step of
+    // 1/65535, and UVs outside [0, 1] stay float, exact.
+    let options = ExportOptions {
+        position_tolerance: None,
+        ..ExportOptions::aggregate(0.0)
+    };
     for (name, a) in shared_meshes() {
-        let b = reimport_with(&a, &ExportOptions::aggregate());
+        let b = reimport_with(&a, &options);
         assert_eq!(a.submeshes.len(), b.submeshes.len(), "{name}");
         for (sa, sb) in a.submeshes.iter().zip(&b.submeshes) {
             assert!(sa.positions == sb.positions, "{name}: positions differ");
@@ -532,6 +536,136 @@ fn every_shared_model_keeps_its_geometry_as_an_aggregate_within_short_attribute_
         // 16-bit rotations: within about 3e-5 rad.
         assert_placements_within(&name, &a, &b, 1e-4);
     }
+}
+
+/// The largest distance between a vertex of `a` and the same vertex of `b`, each placed by the
+/// same-numbered instance of its submesh, and the largest coordinate (for f32 slack).
+fn placed_vertex_error(name: &str, a: &InstancedMesh, b: &InstancedMesh) -> (f32, f32) {
+    assert_eq!(a.submeshes.len(), b.submeshes.len(), "{name}");
+    let (mut worst, mut magnitude) = (0.0f32, 0.0f32);
+    for (s, (ta, tb)) in transforms_by_submesh(a)
+        .iter()
+        .zip(&transforms_by_submesh(b))
+        .enumerate()
+    {
+        assert_eq!(ta.len(), tb.len(), "{name}: submesh {s}");
+        let (pa, pb) = (&a.submeshes[s].positions, &b.submeshes[s].positions);
+        assert_eq!(pa.len(), pb.len(), "{name}: submesh {s}");
+        assert!(
+            a.submeshes[s].indices == b.submeshes[s].indices,
+            "{name}: indices"
+        );
+        for (x, y) in ta.iter().zip(tb) {
+            for (p, q) in pa.iter().zip(pb) {
+                let (p, q) = (x.transform_point3(*p), y.transform_point3(*q));
+                worst = worst.max(p.distance(q));
+                magnitude = magnitude.max(p.abs().max_element());
+            }
+        }
+    }
+    (worst, magnitude)
+}
+
+/// POSITION accessors' component types, one per distinct accessor.
+fn position_types(json: &serde_json::Value) -> BTreeSet<u64> {
+    let mut accessors = BTreeSet::new();
+    for attributes in primitive_attributes(json) {
+        accessors.insert(attributes["POSITION"].as_u64().expect("position"));
+    }
+    accessors
+        .iter()
+        .map(|&a| {
+            json["accessors"][a as usize]["componentType"]
+                .as_u64()
+                .expect("type")
+        })
+        .collect()
+}
+
+#[test]
+fn every_shared_model_keeps_every_placed_vertex_within_the_position_tolerance() {
+    // Aggregates store positions as 16-bit integers where that keeps every vertex, in every
+    // placement (mirrored and non-uniformly scaled ones too), within the tolerance; a generous
+    // tolerance quantizes every run, a zero one none, and either way each placed vertex comes
+    // back within it (plus f32 rounding) of where the same export with float positions puts
+    // it (which the test above holds to the input, short rotations' error included).
+    let float = ExportOptions {
+        position_tolerance: None,
+        ..ExportOptions::aggregate(0.0)
+    };
+    for (name, input) in shared_meshes() {
+        let a = reimport_with(&input, &float);
+        let diagonal = input.bounds().diagonal();
+        // A 16-bit grid over the whole model moves a vertex by up to 1.3e-5 of the diagonal:
+        // the middle tolerances quantize some runs and refuse others.
+        let cases = [
+            (1e-3, Some(5123)),
+            (2e-5, None),
+            (1e-5, None),
+            (5e-6, None),
+            (0.0, Some(5126)),
+        ];
+        for (relative, all_of) in cases {
+            let tolerance = diagonal * relative;
+            let options = ExportOptions::aggregate(tolerance);
+            let glb = export_glb(&input, &options).expect("exports");
+            let types = position_types(&json_of(&glb));
+            if let Some(expected) = all_of {
+                assert!(
+                    types.iter().all(|&t| t == expected),
+                    "{name} at {relative}: position types {types:?}"
+                );
+            }
+            let b = reimport_with(&input, &options);
+            let (worst, magnitude) = placed_vertex_error(&name, &a, &b);
+            let slack = 4.0 * f32::EPSILON * magnitude;
+            assert!(
+                worst <= tolerance + slack,
+                "{name} at {relative}: a vertex moved {worst} (tolerance {tolerance})"
+            );
+        }
+    }
+}
+
+#[test]
+fn small_parts_and_far_baked_geometry_quantize_in_runs_of_their_own() {
+    // An aggregate's model-space parts (a unit cube placed twice, mirrored and stretched) and
+    // geometry baked in world space a kilometre away share one layout, but one grid over both
+    // would round the cube by centimetres: each gets a run whose box its tolerance allows, so
+    // both are quantized and every placed vertex stays within a millimetre.
+    let mut mesh = cubes(&[
+        Affine3A::from_scale(Vec3::new(-1.0, 1.0, 2.5)),
+        Affine3A::from_translation(Vec3::X * 3.0),
+    ]);
+    let mut baked = common::cube();
+    for p in &mut baked.positions {
+        *p = *p * 15.0 + Vec3::new(1500.0, 0.0, 800.0);
+    }
+    mesh.submeshes.push(baked);
+    mesh.instances.push(horizon_mesh::Instance {
+        submesh: 1,
+        transform: Affine3A::IDENTITY,
+    });
+    let tolerance = 1e-3;
+    let options = ExportOptions::aggregate(tolerance);
+    let json = json_of(&export_glb(&mesh, &options).expect("exports"));
+    let float = ExportOptions {
+        position_tolerance: None,
+        ..options
+    };
+    assert_eq!(position_types(&json), BTreeSet::from([5123]));
+    let positions: BTreeSet<u64> = primitive_attributes(&json)
+        .iter()
+        .map(|a| a["POSITION"].as_u64().expect("position"))
+        .collect();
+    assert_eq!(positions.len(), 2, "one run each");
+    let back = reimport_with(&mesh, &options);
+    let exact = reimport_with(&mesh, &float);
+    let (worst, magnitude) = placed_vertex_error("parts and baked", &exact, &back);
+    assert!(
+        worst <= tolerance + 4.0 * f32::EPSILON * magnitude,
+        "{worst}"
+    );
 }
 
 #[test]
