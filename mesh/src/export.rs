@@ -324,6 +324,10 @@ struct SharedRun {
 /// Most vertices in a shared run: every index into it stays 16-bit.
 const RUN_VERTICES: usize = 65_535;
 
+/// Most runs of one layout open at once (each a box of its own), so that finding a run for a
+/// submesh stays a bounded scan however scattered the boxes.
+const OPEN_RUNS: usize = 16;
+
 /// Which submeshes write their vertices together: with `share`, submeshes of one attribute
 /// layout (normals, UVs, colours present or not) fill a run until the next would take it past
 /// [`RUN_VERTICES`], or, with `reach` (quantized positions), past the box extent a member
@@ -340,7 +344,8 @@ const RUN_VERTICES: usize = 65_535;
 /// a metre or two across, with geometry baked in world space a kilometre from the origin; one
 /// run over both would round the small parts by centimetres, so a submesh joins the first open
 /// run of its layout whose box, grown by its own, stays within every member's reach. A run
-/// full of vertices closes; with every reach unbounded this is one open run per layout.
+/// full of vertices closes, and past [`OPEN_RUNS`] of a layout the oldest does; with every
+/// reach unbounded this is one open run per layout.
 fn vertex_runs(
     submeshes: &[Submesh],
     share: bool,
@@ -397,6 +402,9 @@ fn vertex_runs(
             if share && n <= RUN_VERTICES {
                 // Runs this one's vertices would overflow are as good as full.
                 candidates.retain(|o| o.count + n <= RUN_VERTICES);
+                if candidates.len() == OPEN_RUNS {
+                    candidates.remove(0);
+                }
                 candidates.push(Open {
                     run: runs.len() - 1,
                     count: n,
