@@ -53,7 +53,7 @@ pub struct ExportOptions {
     /// quantisation grid).
     pub share_vertices: bool,
     /// Normals as 8-bit and UVs in [0, 1] and colours as 16-bit normalized integers
-    /// (KHR_mesh_quantization), positions still float: 20 bytes a vertex instead of 32, normals
+    /// (KHR_mesh_quantization): with float positions 20 bytes a vertex instead of 32, normals
     /// within about 0.5 degrees. Compression always does this (and quantizes positions too).
     pub short_attributes: bool,
     /// Positions as unsigned 16-bit integers over each vertex run's box (KHR_mesh_quantization),
