@@ -110,6 +110,13 @@ impl Display {
         pixels * self.distance * pixel_solid_angle().sqrt()
     }
 
+    /// The length that spans `pixels` pixels seen face-on as near as any of the aggregate's
+    /// geometry can come: an object's centre stays `distance` away, its surface up to `r_max`
+    /// nearer.
+    pub fn nearest_length_of_pixels(&self, pixels: f64) -> f64 {
+        pixels * (self.distance - self.r_max).max(0.0) * pixel_solid_angle().sqrt()
+    }
+
     /// Atlas side: `texels_per_pixel` texels per covered pixel, a power of two in
     /// [`ATLAS_SIDE`].
     pub fn atlas_side(&self, options: &AggregateOptions) -> u32 {
@@ -159,6 +166,21 @@ mod tests {
             let back = d.pixels_of_length(d.length_of_pixels(px));
             assert!((back - px).abs() < 1e-9 * px, "{px} -> {back}");
         }
+    }
+
+    #[test]
+    fn the_nearest_geometry_is_r_max_inside_the_display_distance() {
+        // An r_max object centred on the sphere, towards the viewer: its surface is r_max
+        // nearer than `distance`, so a length there spans more pixels.
+        let o = AggregateOptions::default();
+        let d = Display::of(Vec3::ZERO, 30.0, 2.0, &o);
+        let near = d.nearest_length_of_pixels(1.0);
+        let expected = d.length_of_pixels(1.0) * (d.distance - d.r_max) / d.distance;
+        assert!(
+            (near - expected).abs() < 1e-12 * expected,
+            "{near} vs {expected}"
+        );
+        assert!(near < d.length_of_pixels(1.0));
     }
 
     #[test]

@@ -482,10 +482,11 @@ fn generate_unoptimized(
     Ok(out)
 }
 
-/// How far, in pixels at the nearest display distance, storing an aggregate's positions as
-/// 16-bit integers may move a vertex (`ExportOptions::position_tolerance`). An eighth of a
-/// pixel is under the 8-bit normals' shading change and far under IAS's own error (median
-/// 0.66 px on the village, `budget.rs`); a run it refuses keeps float positions.
+/// How far, in pixels as near as the aggregate's geometry can be shown
+/// (`Display::nearest_length_of_pixels`), storing its positions as 16-bit integers may move a
+/// vertex (`ExportOptions::position_tolerance`). An eighth of a pixel is under the 8-bit
+/// normals' shading change and far under IAS's own error (median 0.66 px on the village,
+/// `budget.rs`); a run it refuses keeps float positions.
 pub const POSITION_PIXELS: f64 = 0.125;
 
 /// Encodes the aggregate and fills in its counts.
@@ -496,7 +497,7 @@ fn finish(
     mut stats: NodeStats,
 ) -> Result<NodeOutput, AggregateError> {
     let node = input.node;
-    let tolerance = input.display.length_of_pixels(POSITION_PIXELS) as f32;
+    let tolerance = input.display.nearest_length_of_pixels(POSITION_PIXELS) as f32;
     let glb = export_glb(&mesh, &ExportOptions::aggregate(tolerance)).map_err(|e| {
         AggregateError::Glb {
             node,

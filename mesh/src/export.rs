@@ -112,8 +112,24 @@ impl ExportOptions {
 
 /// Writes `mesh` as a self-contained GLB.
 pub fn export_glb(mesh: &InstancedMesh, options: &ExportOptions) -> Result<Vec<u8>, ExportError> {
-    // Stage 1: refuse a mesh that breaks the model's invariants.
+    // Stage 1: refuse a mesh that breaks the model's invariants; leave out submeshes without
+    // triangles, which draw nothing and would need accessors of no elements, which glTF
+    // forbids.
     mesh.validate()?;
+    let drawn: InstancedMesh;
+    let mesh = if mesh.submeshes.iter().any(|s| s.indices.is_empty()) {
+        let mut copy = mesh.clone();
+        let keep: Vec<bool> = copy
+            .submeshes
+            .iter()
+            .map(|s| !s.indices.is_empty())
+            .collect();
+        copy.retain_submeshes(&keep);
+        drawn = copy;
+        &drawn
+    } else {
+        mesh
+    };
     let mut w = GlbWriter::new(*options);
     // Stage 2: geometry, one glTF mesh per submesh, its vertices in a run of their own or one
     // shared with other submeshes; remember each dequantisation transform.
@@ -221,31 +237,31 @@ impl Dequantize {
     }
 
     /// Whether placing these stored positions by `placed` stays finite both ways they are
-    /// written (a node matrix, or an instance under a scaled node), and keeps every vertex
-    /// within `tolerance` of its place in every placement. Rounding moves a stored position by
-    /// at most half a step on each axis, which a placement stretches by at most its largest
-    /// axis scale.
+    /// written (a node matrix, or an instance under a scaled node, with room to spare for the
+    /// rotation a reader decodes), and keeps every vertex within `tolerance` of its place in
+    /// every placement: rounding moves a stored position by at most half a step on each axis,
+    /// which a placement stretches by at most [`rounding_stretch`].
     fn fits(&self, placed: &[Affine3A], tolerance: f32) -> bool {
-        let rounding = ROUNDING * self.step;
         self.affine().is_finite()
             && placed.iter().all(|t| {
+                let origin = t.transform_point3(self.offset) / self.step;
                 (*t * self.affine()).is_finite()
-                    && (t.transform_point3(self.offset) / self.step).is_finite()
-                    && rounding * crate::transform::max_axis_scale(t) <= tolerance
+                    && origin.abs().max_element() < f32::MAX / 2.0
+                    && self.step * rounding_stretch(t) <= tolerance
             })
     }
 
     /// The largest box extent whose 16-bit step keeps positions placed by `placed` within
-    /// `tolerance` ([`Dequantize::fits`]' bound, solved for the extent; unbounded for a
-    /// submesh placed nowhere).
+    /// `tolerance` ([`Dequantize::fits`]' bound, solved for the extent); unbounded for a
+    /// submesh placed nowhere, zero (float positions) for a tolerance that is not a positive
+    /// number.
     fn reach(placed: &[Affine3A], tolerance: f32) -> f32 {
-        let scale = placed
-            .iter()
-            .map(crate::transform::max_axis_scale)
-            .fold(0.0f32, f32::max);
-        if scale > 0.0 {
+        let stretch = placed.iter().map(rounding_stretch).fold(0.0f32, f32::max);
+        if tolerance.is_nan() || tolerance <= 0.0 {
+            0.0
+        } else if stretch > 0.0 {
             // The step is rounded up by under a tenth (`short_step`).
-            tolerance / (ROUNDING * scale) * STEPS / 1.1
+            tolerance / stretch * STEPS / 1.1
         } else {
             f32::INFINITY
         }
@@ -254,8 +270,23 @@ impl Dequantize {
 
 /// Steps of a 16-bit quantisation grid across its box.
 const STEPS: f32 = 65535.0;
-/// Rounding to the grid moves a position by at most this many steps (half a step per axis).
-const ROUNDING: f32 = 0.866_025_4;
+
+/// How far, in steps, a placement can move a position that rounding moved by up to half a step
+/// on each axis: the longest image under its linear part of a half-step box's corner,
+/// `(+-1/2, +-1/2, +-1/2)`. For a TRS placement that is half the length of its scale vector;
+/// shear can stretch a diagonal further than any axis.
+fn rounding_stretch(t: &Affine3A) -> f32 {
+    const CORNERS: [Vec3; 4] = [
+        Vec3::new(0.5, 0.5, 0.5),
+        Vec3::new(0.5, 0.5, -0.5),
+        Vec3::new(0.5, -0.5, 0.5),
+        Vec3::new(-0.5, 0.5, 0.5),
+    ];
+    CORNERS
+        .iter()
+        .map(|&c| (t.matrix3 * c).length())
+        .fold(0.0f32, f32::max)
+}
 
 /// A vertex attribute ready to write: tightly packed elements of `stride` bytes.
 struct Attribute {
@@ -346,7 +377,9 @@ const OPEN_RUNS: usize = 16;
 /// run over both would round the small parts by centimetres, so a submesh joins the first open
 /// run of its layout whose box, grown by its own, stays within every member's reach. A run
 /// full of vertices closes, and past [`OPEN_RUNS`] of a layout the oldest does; with every
-/// reach unbounded this is one open run per layout.
+/// reach unbounded this is one open run per layout. A submesh whose own box is beyond its
+/// reach keeps float positions wherever it goes, so it shares the runs of its layout kept for
+/// such submeshes, unbounded; an empty one joins any run and bounds none.
 fn vertex_runs(
     submeshes: &[Submesh],
     share: bool,
@@ -362,7 +395,10 @@ fn vertex_runs(
     }
     let mut runs: Vec<Vec<usize>> = Vec::new();
     let mut run_of = Vec::with_capacity(submeshes.len());
-    let mut open: BTreeMap<(bool, bool, bool), Vec<Open>> = BTreeMap::new();
+    /// Normals, UVs and colours present or not, and whether the positions stay float.
+    type Kind = ((bool, bool, bool), bool);
+    // Per kind, the runs still open.
+    let mut open: BTreeMap<Kind, Vec<Open>> = BTreeMap::new();
     for (s, sub) in submeshes.iter().enumerate() {
         let n = sub.positions.len();
         let layout = (
@@ -376,8 +412,14 @@ fn vertex_runs(
             .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), p| {
                 (lo.min(*p), hi.max(*p))
             });
-        let own_reach = reach.map_or(f32::INFINITY, |r| r[s]);
-        let candidates = open.entry(layout).or_default();
+        let own_extent = (hi - lo).max_element();
+        let (own_reach, float) = match reach {
+            Some(_) if n == 0 => (f32::INFINITY, false),
+            Some(r) if own_extent <= r[s] => (r[s], false),
+            Some(_) => (f32::INFINITY, true),
+            None => (f32::INFINITY, false),
+        };
+        let candidates = open.entry((layout, float)).or_default();
         let fits_box = |o: &Open| {
             let extent = (o.hi.max(hi) - o.lo.min(lo)).max_element();
             n == 0 || extent <= o.reach.min(own_reach)
@@ -1237,10 +1279,14 @@ fn quantize_positions<I: Iterator<Item = Vec3>>(
         (min, max) = (Vec3::ZERO, Vec3::ZERO);
     }
     let extent = (max - min).max_element();
+    // A step below f32's normal range rounds positions past the grid's 65,535 steps (and
+    // one of zero or infinity has no grid): such a box is stored on a step that fits nothing
+    // (infinite), which `fits` refuses, so its positions stay float.
     let step = match extent / STEPS {
-        step if step > 0.0 && short => short_step(step),
-        step if step > 0.0 => step,
-        _ => 1.0,
+        step if step.is_normal() && short => short_step(step),
+        step if step.is_normal() => step,
+        _ if count == 0 || extent == 0.0 => 1.0,
+        _ => f32::INFINITY,
     };
     let mut bytes = Vec::with_capacity(count * 8);
     let mut lo = [u16::MAX; 3];
@@ -1278,6 +1324,9 @@ fn quantize_positions<I: Iterator<Item = Vec3>>(
 /// by under a tenth): every GPU-instanced node of a quantized run carries the step as its
 /// scale, and "0.000016" is a third of the JSON of "1.5259021896696422e-5".
 fn short_step(step: f32) -> f32 {
+    if !step.is_normal() {
+        return step;
+    }
     let exponent = step.log10().floor() as i32 - 1;
     let unit = 10f64.powi(exponent);
     let mut short = ((f64::from(step) / unit).ceil() * unit) as f32;
@@ -1298,5 +1347,114 @@ fn type_name(n: usize) -> &'static str {
         2 => "VEC2",
         3 => "VEC3",
         _ => "VEC4",
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    /// A submesh of `n` vertices spread over `[x, x + width]` on the x axis, with or without
+    /// normals.
+    fn strip(n: usize, x: f32, width: f32, normals: bool) -> Submesh {
+        let positions: Vec<Vec3> = (0..n)
+            .map(|i| Vec3::new(x + width * i as f32 / (n.max(2) - 1) as f32, 0.0, 0.0))
+            .collect();
+        Submesh {
+            normals: normals.then(|| vec![Vec3::Z; n]),
+            indices: (0..(n - n % 3) as u32).collect(),
+            positions,
+            ..Default::default()
+        }
+    }
+
+    /// The runs as they were before quantized positions (format 10): one open run per layout,
+    /// replaced when the next submesh would take it past the vertex limit.
+    fn runs_of_format_10(submeshes: &[Submesh], share: bool) -> Vec<Vec<usize>> {
+        let mut runs: Vec<Vec<usize>> = Vec::new();
+        let mut open: BTreeMap<(bool, bool, bool), (usize, usize)> = BTreeMap::new();
+        for (s, sub) in submeshes.iter().enumerate() {
+            let n = sub.positions.len();
+            let layout = (
+                sub.normals.is_some(),
+                sub.uvs.is_some(),
+                sub.colors.is_some(),
+            );
+            match open.get_mut(&layout) {
+                Some((run, count)) if share && *count + n <= RUN_VERTICES => {
+                    *count += n;
+                    runs[*run].push(s);
+                }
+                _ => {
+                    runs.push(vec![s]);
+                    if share && n <= RUN_VERTICES {
+                        open.insert(layout, (runs.len() - 1, n));
+                    }
+                }
+            }
+        }
+        runs
+    }
+
+    proptest! {
+        #[test]
+        fn without_a_reach_runs_are_what_they_were(
+            parts in prop::collection::vec((0usize..40_000, any::<bool>()), 0..24),
+            share in any::<bool>(),
+        ) {
+            let submeshes: Vec<Submesh> = parts
+                .iter()
+                .enumerate()
+                .map(|(k, &(n, normals))| strip(n, k as f32, 1.0, normals))
+                .collect();
+            let (runs, run_of) = vertex_runs(&submeshes, share, None);
+            prop_assert_eq!(&runs, &runs_of_format_10(&submeshes, share));
+            for (s, &(run, at)) in run_of.iter().enumerate() {
+                prop_assert_eq!(runs[run][at], s);
+            }
+        }
+    }
+
+    #[test]
+    fn a_submesh_joins_a_run_only_within_every_members_reach() {
+        // A tolerates a box of 3, B and C of 100. B's box stretches A's run to 6: past A's
+        // reach though within B's own, so B opens a run of its own; C, beside A, rejoins A's
+        // run, which stayed open beside B's.
+        let submeshes = [
+            strip(3, 0.0, 1.0, true),
+            strip(3, 5.0, 1.0, true),
+            strip(3, 1.5, 1.0, true),
+        ];
+        let (runs, _) = vertex_runs(&submeshes, true, Some(&[3.0, 100.0, 100.0]));
+        assert_eq!(runs, vec![vec![0, 2], vec![1]]);
+        // A submesh wider than its own reach keeps float positions wherever it goes: it
+        // shares the float runs of its layout, whatever their boxes.
+        let wide = [
+            strip(3, 0.0, 10.0, true),
+            strip(3, 500.0, 10.0, true),
+            strip(3, 0.0, 1.0, true),
+        ];
+        let (runs, _) = vertex_runs(&wide, true, Some(&[1.0, 1.0, 100.0]));
+        assert_eq!(runs, vec![vec![0, 1], vec![2]]);
+    }
+
+    #[test]
+    fn short_steps_are_never_shorter_and_never_a_tenth_longer() {
+        let mut step = 1.3e-30f32;
+        // Up to boxes of 6.5e9 units (larger steps print as "1200000.0").
+        while step < 1e5 {
+            let short = short_step(step);
+            assert!(
+                short >= step && short <= step * 1.1 + f32::EPSILON * step,
+                "{step} -> {short}"
+            );
+            // Two significant digits, as the JSON writes them: "0.000016", "1.3e-30".
+            let text = number(short).to_string();
+            assert!(text.len() <= 8, "{step} -> {text}");
+            step *= 1.37;
+        }
+        assert_eq!(short_step(0.0), 0.0);
+        assert_eq!(short_step(1e-42), 1e-42);
     }
 }

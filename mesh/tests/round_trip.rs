@@ -11,6 +11,7 @@ use common::{cubes, relative_difference};
 use glam::{Affine3A, Mat3, Quat, Vec3};
 use horizon_mesh::{
     export_glb, import_bytes, import_file, ExportOptions, Format, ImportOptions, InstancedMesh,
+    Submesh,
 };
 use proptest::prelude::*;
 
@@ -585,14 +586,16 @@ fn position_types(json: &serde_json::Value) -> BTreeSet<u64> {
 #[test]
 fn every_shared_model_keeps_every_placed_vertex_within_the_position_tolerance() {
     // Aggregates store positions as 16-bit integers where that keeps every vertex, in every
-    // placement (mirrored and non-uniformly scaled ones too), within the tolerance; a generous
-    // tolerance quantizes every run, a zero one none, and either way each placed vertex comes
-    // back within it (plus f32 rounding) of where the same export with float positions puts
-    // it (which the test above holds to the input, short rotations' error included).
+    // placement (the models' mirrored and scaled ones), within the tolerance; a generous
+    // tolerance quantizes every run, a zero one none, one between some, and either way each
+    // placed vertex comes back within it (plus f32 rounding) of where the same export with
+    // float positions puts it (which the test above holds to the input, short rotations'
+    // error included).
     let float = ExportOptions {
         position_tolerance: None,
         ..ExportOptions::aggregate(0.0)
     };
+    let mut mixed = 0;
     for (name, input) in shared_meshes() {
         let a = reimport_with(&input, &float);
         let diagonal = input.bounds().diagonal();
@@ -616,6 +619,7 @@ fn every_shared_model_keeps_every_placed_vertex_within_the_position_tolerance() 
                     "{name} at {relative}: position types {types:?}"
                 );
             }
+            mixed += usize::from(types.len() > 1);
             let b = reimport_with(&input, &options);
             let (worst, magnitude) = placed_vertex_error(&name, &a, &b);
             let slack = 4.0 * f32::EPSILON * magnitude;
@@ -625,14 +629,166 @@ fn every_shared_model_keeps_every_placed_vertex_within_the_position_tolerance() 
             );
         }
     }
+    // Runs quantized beside runs refused in one file, so the bound is tested at its edge.
+    assert!(mixed > 0, "no tolerance split any model's runs");
+}
+
+/// `n` vertices scattered in the unit cube, as triangles of three consecutive vertices: over
+/// many vertices, rounding to a grid comes close to its worst case on every axis at once.
+fn point_cloud(n: u32, seed: u64) -> Submesh {
+    let mut state = seed;
+    let mut next = move || {
+        state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (state >> 40) as f32 / (1u64 << 24) as f32
+    };
+    let positions: Vec<Vec3> = (0..n).map(|_| Vec3::new(next(), next(), next())).collect();
+    Submesh {
+        positions,
+        indices: (0..n - n % 3).collect(),
+        ..Default::default()
+    }
+}
+
+#[test]
+fn sheared_and_strongly_scaled_placements_stay_within_every_tolerance() {
+    // A point cloud stretched tenfold along its own diagonal (a rotation, then a non-uniform
+    // scale: shear, written as a parent and child pair), mirrored, and twice uniformly scaled
+    // (GPU-instanced). Rounding to the grid moves a vertex by up to half a step on every axis
+    // at once, and the stretch magnifies exactly that diagonal: by 8.7 steps, where the
+    // longest stretched axis would promise 5.1. Over a sweep of tolerances 15% apart, every
+    // placed vertex stays within the tolerance of the float export, and the sweep passes from
+    // float to quantized, so at the first tolerance that quantizes the rounding is near its
+    // bound.
+    let diagonal = Quat::from_rotation_arc(Vec3::ONE.normalize(), Vec3::X);
+    let stretch = Mat3::from_diagonal(Vec3::new(10.0, 1.0, 1.0)) * Mat3::from_quat(diagonal);
+    let mut mesh = InstancedMesh {
+        submeshes: vec![point_cloud(6000, 7)],
+        ..Default::default()
+    };
+    for transform in [
+        Affine3A::from_mat3(stretch),
+        Affine3A::from_scale(Vec3::new(-2.0, 1.0, 1.5)),
+        Affine3A::from_scale(Vec3::splat(2.0)),
+        Affine3A::from_scale_rotation_translation(
+            Vec3::splat(2.0),
+            Quat::from_rotation_y(0.7),
+            Vec3::new(5.0, 0.0, 0.0),
+        ),
+    ] {
+        mesh.instances.push(horizon_mesh::Instance {
+            submesh: 0,
+            transform,
+        });
+    }
+    let float = ExportOptions {
+        position_tolerance: None,
+        ..ExportOptions::aggregate(0.0)
+    };
+    let exact = reimport_with(&mesh, &float);
+    let mut seen = BTreeSet::new();
+    let mut tolerance = 1e-5f32;
+    while tolerance < 1e-2 {
+        let options = ExportOptions::aggregate(tolerance);
+        let types = position_types(&json_of(&export_glb(&mesh, &options).expect("exports")));
+        seen.extend(types.iter().copied());
+        let back = reimport_with(&mesh, &options);
+        let (worst, magnitude) = placed_vertex_error("cloud", &exact, &back);
+        assert!(
+            worst <= tolerance + 8.0 * f32::EPSILON * magnitude,
+            "a vertex moved {worst} at tolerance {tolerance} ({types:?})"
+        );
+        tolerance *= 1.15;
+    }
+    assert_eq!(
+        seen,
+        BTreeSet::from([5123, 5126]),
+        "the sweep crosses the bound"
+    );
+}
+
+#[test]
+fn runs_refused_quantization_still_share_their_vertices() {
+    // Ten cubes of one layout, each placed twice: with a tolerance no grid meets they keep
+    // float positions and share one run of vertex accessors, as without quantization.
+    let mut mesh = InstancedMesh::default();
+    for k in 0..10 {
+        mesh.submeshes.push(common::cube());
+        for x in [0.0, 2.0] {
+            mesh.instances.push(horizon_mesh::Instance {
+                submesh: k,
+                transform: Affine3A::from_translation(Vec3::new(x, 3.0 * k as f32, 0.0)),
+            });
+        }
+    }
+    let float = ExportOptions {
+        position_tolerance: None,
+        ..ExportOptions::aggregate(0.0)
+    };
+    let unshared = json_of(&export_glb(&mesh, &float).expect("exports"));
+    for tolerance in [0.0, 1e-9, -1.0, f32::NAN] {
+        let options = ExportOptions::aggregate(tolerance);
+        let json = json_of(&export_glb(&mesh, &options).expect("exports"));
+        assert_eq!(position_types(&json), BTreeSet::from([5126]), "{tolerance}");
+        assert_eq!(
+            json["accessors"].as_array().map(Vec::len),
+            unshared["accessors"].as_array().map(Vec::len),
+            "{tolerance}: runs split"
+        );
+    }
+}
+
+#[test]
+fn tiny_and_empty_submeshes_neither_fail_nor_spoil_a_run() {
+    // A submesh whose box is below f32's normal range cannot be put on a 16-bit grid: it keeps
+    // float positions (compressed too) instead of failing. An empty submesh placed at a
+    // scale of 10,000 draws nothing: it is left out (glTF has no empty accessor) and keeps no
+    // cube from quantizing.
+    let mut mesh = cubes(&[
+        Affine3A::IDENTITY,
+        Affine3A::from_translation(Vec3::X * 3.0),
+    ]);
+    mesh.submeshes.push(Submesh {
+        positions: vec![Vec3::ZERO, Vec3::splat(1e-41), Vec3::new(0.0, 1e-41, 0.0)],
+        indices: vec![0, 1, 2],
+        ..Default::default()
+    });
+    mesh.submeshes.push(Submesh::default());
+    mesh.submeshes.push(common::cube());
+    for (submesh, scale) in [(1, 1.0), (2, 1e4), (2, 2e4), (3, 1.0)] {
+        mesh.instances.push(horizon_mesh::Instance {
+            submesh,
+            transform: Affine3A::from_scale(Vec3::splat(scale)),
+        });
+    }
+    for options in [ExportOptions::aggregate(1e-3), ExportOptions::compressed()] {
+        let back = reimport_with(&mesh, &options);
+        assert_eq!(
+            back.expanded_triangle_count(),
+            mesh.expanded_triangle_count()
+        );
+    }
+    let json = json_of(&export_glb(&mesh, &ExportOptions::aggregate(1e-3)).expect("exports"));
+    let attributes = primitive_attributes(&json);
+    let position = |m: usize| attributes[m]["POSITION"].as_u64().expect("position") as usize;
+    let component = |m: usize| json["accessors"][position(m)]["componentType"].as_u64();
+    // The empty submesh is left out of the file (it draws nothing): the second cube is mesh 2.
+    assert_eq!(attributes.len(), 3);
+    assert_eq!(component(0), Some(5123), "cube");
+    assert_eq!(component(2), Some(5123), "cube after the empty submesh");
+    assert_eq!(position(0), position(2), "the cubes share a run");
+    assert_eq!(component(1), Some(5126), "subnormal box");
 }
 
 #[test]
 fn small_parts_and_far_baked_geometry_quantize_in_runs_of_their_own() {
-    // An aggregate's model-space parts (a unit cube placed twice, mirrored and stretched) and
-    // geometry baked in world space a kilometre away share one layout, but one grid over both
-    // would round the cube by centimetres: each gets a run whose box its tolerance allows, so
-    // both are quantized and every placed vertex stays within a millimetre.
+    // An aggregate's model-space parts (a unit cube placed twice, mirrored and stretched, and
+    // another placed twice at unit scale after it) and geometry baked in world space a
+    // kilometre away share one layout, but one grid over both would round the cubes by
+    // centimetres: the cubes share a run and the baked geometry has its own, both quantized,
+    // and every placed vertex stays within the tolerance. The GPU-instanced nodes carry the
+    // grid's step as their scale, so unit-scale instances still need no SCALE stream.
     let mut mesh = cubes(&[
         Affine3A::from_scale(Vec3::new(-1.0, 1.0, 2.5)),
         Affine3A::from_translation(Vec3::X * 3.0),
@@ -646,6 +802,13 @@ fn small_parts_and_far_baked_geometry_quantize_in_runs_of_their_own() {
         submesh: 1,
         transform: Affine3A::IDENTITY,
     });
+    mesh.submeshes.push(common::cube());
+    for x in [10.0, 20.0] {
+        mesh.instances.push(horizon_mesh::Instance {
+            submesh: 2,
+            transform: Affine3A::from_translation(Vec3::new(x, 0.0, 5.0)),
+        });
+    }
     let tolerance = 1e-3;
     let options = ExportOptions::aggregate(tolerance);
     let json = json_of(&export_glb(&mesh, &options).expect("exports"));
@@ -654,11 +817,35 @@ fn small_parts_and_far_baked_geometry_quantize_in_runs_of_their_own() {
         ..options
     };
     assert_eq!(position_types(&json), BTreeSet::from([5123]));
-    let positions: BTreeSet<u64> = primitive_attributes(&json)
+    let positions: Vec<u64> = primitive_attributes(&json)
         .iter()
         .map(|a| a["POSITION"].as_u64().expect("position"))
         .collect();
-    assert_eq!(positions.len(), 2, "one run each");
+    assert_eq!(positions[0], positions[2], "the cubes share a run");
+    assert_ne!(positions[0], positions[1], "the baked geometry has its own");
+    // The nodes of the two cubes: each scaled by the step of their run's grid, a unit cube's
+    // (1 / 65535, rounded up to two digits).
+    let nodes = json["nodes"].as_array().expect("nodes");
+    let instanced = |mesh_index: u64| {
+        nodes
+            .iter()
+            .find(|n| n["mesh"].as_u64() == Some(mesh_index))
+            .expect("node")
+    };
+    for m in [0, 2] {
+        let scale = &instanced(m)["scale"];
+        assert_eq!(
+            scale,
+            &serde_json::json!([0.000016, 0.000016, 0.000016]),
+            "{m}"
+        );
+    }
+    let attributes = |m: u64| &instanced(m)["extensions"]["EXT_mesh_gpu_instancing"]["attributes"];
+    assert!(
+        attributes(0).get("SCALE").is_some(),
+        "stretched and mirrored"
+    );
+    assert!(attributes(2).get("SCALE").is_none(), "unit scale");
     let back = reimport_with(&mesh, &options);
     let exact = reimport_with(&mesh, &float);
     let (worst, magnitude) = placed_vertex_error("parts and baked", &exact, &back);
