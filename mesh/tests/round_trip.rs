@@ -55,6 +55,14 @@ fn reimport(mesh: &InstancedMesh, compress: bool) -> InstancedMesh {
     reimport_with(mesh, &options)
 }
 
+/// What aggregates are written as, but with float positions.
+fn float_positions() -> ExportOptions {
+    ExportOptions {
+        position_tolerance: None,
+        ..ExportOptions::aggregate(0.0)
+    }
+}
+
 /// `mesh` exported with `options` and imported back, validated.
 fn reimport_with(mesh: &InstancedMesh, options: &ExportOptions) -> InstancedMesh {
     let glb = export_glb(mesh, options).expect("exports");
@@ -501,10 +509,7 @@ fn every_shared_model_keeps_its_geometry_as_an_aggregate_within_short_attribute_
     // with float positions, positions and indices come back exactly, placements within the
     // short rotations' error, normals within about half a degree, UVs within half a step of
     // 1/65535, and UVs outside [0, 1] stay float, exact.
-    let options = ExportOptions {
-        position_tolerance: None,
-        ..ExportOptions::aggregate(0.0)
-    };
+    let options = float_positions();
     for (name, a) in shared_meshes() {
         let b = reimport_with(&a, &options);
         assert_eq!(a.submeshes.len(), b.submeshes.len(), "{name}");
@@ -591,10 +596,7 @@ fn every_shared_model_keeps_every_placed_vertex_within_the_position_tolerance() 
     // placed vertex comes back within it (plus f32 rounding) of where the same export with
     // float positions puts it (which the test above holds to the input, short rotations'
     // error included).
-    let float = ExportOptions {
-        position_tolerance: None,
-        ..ExportOptions::aggregate(0.0)
-    };
+    let float = float_positions();
     let mut mixed = 0;
     for (name, input) in shared_meshes() {
         let a = reimport_with(&input, &float);
@@ -682,10 +684,7 @@ fn sheared_and_strongly_scaled_placements_stay_within_every_tolerance() {
             transform,
         });
     }
-    let float = ExportOptions {
-        position_tolerance: None,
-        ..ExportOptions::aggregate(0.0)
-    };
+    let float = float_positions();
     let exact = reimport_with(&mesh, &float);
     let mut seen = BTreeSet::new();
     let mut tolerance = 1e-5f32;
@@ -722,10 +721,7 @@ fn runs_refused_quantization_still_share_their_vertices() {
             });
         }
     }
-    let float = ExportOptions {
-        position_tolerance: None,
-        ..ExportOptions::aggregate(0.0)
-    };
+    let float = float_positions();
     let unshared = json_of(&export_glb(&mesh, &float).expect("exports"));
     for tolerance in [0.0, 1e-9, -1.0, f32::NAN] {
         let options = ExportOptions::aggregate(tolerance);
@@ -812,10 +808,7 @@ fn small_parts_and_far_baked_geometry_quantize_in_runs_of_their_own() {
     let tolerance = 1e-3;
     let options = ExportOptions::aggregate(tolerance);
     let json = json_of(&export_glb(&mesh, &options).expect("exports"));
-    let float = ExportOptions {
-        position_tolerance: None,
-        ..options
-    };
+    let float = float_positions();
     assert_eq!(position_types(&json), BTreeSet::from([5123]));
     let positions: Vec<u64> = primitive_attributes(&json)
         .iter()
