@@ -1,7 +1,8 @@
 //! GLB export of an instanced mesh (glTF 2.0 spec; EXT_mesh_gpu_instancing;
 //! KHR_mesh_quantization; EXT_meshopt_compression; KHR_texture_transform).
 //!
-//! Each submesh becomes one glTF mesh. A submesh with two or more instances that are all TRS is
+//! Each submesh with triangles becomes one glTF mesh (one without draws nothing, and glTF has
+//! no empty accessor, so it is left out). A submesh with two or more instances that are all TRS is
 //! one node with EXT_mesh_gpu_instancing; otherwise each instance is a node with a matrix, or,
 //! when the transform has shear (which a glTF matrix may not), a parent and child pair from
 //! [`crate::transform::decompose_svd`]. Mirrored instances keep their negative determinant,
