@@ -133,8 +133,8 @@ fn encode_png(image: &RgbaImage, opaque: bool) -> Result<Vec<u8>, AtlasError> {
 /// Optimised Huffman tables (the `jpeg-encoder` crate, 0.7.1) measured 6.3% smaller on a
 /// sample of 358 of the city's atlases at identical pixels in libjpeg and `jpeg-decoder`, but
 /// zune-jpeg 0.5.15 (`image`'s decoder, so most Rust engines') decoded 59 of them wrongly;
-/// 4:2:0 chroma was 15% smaller but blurs the charts' colours across their 2-texel gutters.
-/// Neither is used.
+/// 4:2:0 chroma was 15% smaller but halves the colour resolution of charts a few texels wide
+/// (36 dB PSNR against the decoded 4:4:4 atlases). Neither is used.
 fn encode_jpeg(rgb: &[u8], width: u32, height: u32, quality: u8) -> Result<Vec<u8>, AtlasError> {
     let mut out = Vec::new();
     JpegEncoder::new_with_quality(&mut out, quality)
