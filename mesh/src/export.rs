@@ -37,7 +37,7 @@ use glam::{Affine3A, Mat4, Quat, Vec3, Vec4};
 use serde_json::{json, Map, Value};
 
 use crate::error::ExportError;
-use crate::model::{AlphaMode, InstancedMesh, Material, Submesh, Texture, Wrap};
+use crate::model::{Aabb, AlphaMode, InstancedMesh, Material, Submesh, Texture, Wrap};
 use crate::transform::{decompose_svd, decompose_trs, Trs};
 
 /// Options for [`export_glb`].
@@ -390,8 +390,7 @@ fn vertex_runs(
     struct Open {
         run: usize,
         count: usize,
-        lo: Vec3,
-        hi: Vec3,
+        bounds: Aabb,
         reach: f32,
     }
     let mut runs: Vec<Vec<usize>> = Vec::new();
@@ -407,13 +406,9 @@ fn vertex_runs(
             sub.uvs.is_some(),
             sub.colors.is_some(),
         );
-        let (lo, hi) = sub
-            .positions
-            .iter()
-            .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), p| {
-                (lo.min(*p), hi.max(*p))
-            });
-        let own_extent = (hi - lo).max_element();
+        let mut bounds = Aabb::EMPTY;
+        sub.positions.iter().for_each(|&p| bounds.grow(p));
+        let own_extent = (bounds.max - bounds.min).max_element();
         let (own_reach, float) = match reach {
             Some(_) if n == 0 => (f32::INFINITY, false),
             Some(r) if own_extent <= r[s] => (r[s], false),
@@ -422,8 +417,8 @@ fn vertex_runs(
         };
         let candidates = open.entry((layout, float)).or_default();
         let fits_box = |o: &Open| {
-            let extent = (o.hi.max(hi) - o.lo.min(lo)).max_element();
-            n == 0 || extent <= o.reach.min(own_reach)
+            let grown = o.bounds.union(&bounds);
+            n == 0 || (grown.max - grown.min).max_element() <= o.reach.min(own_reach)
         };
         let joined = share
             .then(|| {
@@ -435,8 +430,7 @@ fn vertex_runs(
         if let Some(k) = joined {
             let o = &mut candidates[k];
             o.count += n;
-            o.lo = o.lo.min(lo);
-            o.hi = o.hi.max(hi);
+            o.bounds = o.bounds.union(&bounds);
             o.reach = o.reach.min(own_reach);
             run_of.push((o.run, runs[o.run].len()));
             runs[o.run].push(s);
@@ -452,8 +446,7 @@ fn vertex_runs(
                 candidates.push(Open {
                     run: runs.len() - 1,
                     count: n,
-                    lo,
-                    hi,
+                    bounds,
                     reach: own_reach,
                 });
             }
@@ -668,18 +661,19 @@ impl GlbWriter {
                 .iter()
                 .flat_map(|&(m, order, _)| order.iter().map(|&v| m.positions[v as usize]))
         };
-        let quantized = self
-            .position_tolerance
-            .map(|tolerance| (quantize_positions(positions, !self.compress), tolerance))
-            .filter(|((_, d), tolerance)| {
-                parts
-                    .iter()
-                    .all(|&(_, _, placed)| d.fits(placed, *tolerance))
-            });
-        let (position, dequantize) = match quantized {
-            Some((q, _)) => {
+        // The grid first, from the box alone; the positions are encoded once, on it or as
+        // floats.
+        let fitting = self.position_tolerance.and_then(|tolerance| {
+            let d = grid(positions(), !self.compress);
+            parts
+                .iter()
+                .all(|&(_, _, placed)| d.fits(placed, tolerance))
+                .then_some(d)
+        });
+        let (position, dequantize) = match fitting {
+            Some(d) => {
                 self.quantized = true;
-                q
+                (quantized_attribute(positions(), &d), d)
             }
             None => (
                 float_attribute(positions().map(|p| p.to_array()), true),
@@ -1234,7 +1228,7 @@ fn norm16_attribute<const N: usize>(
     for v in values {
         for x in v {
             let code = if signed {
-                meshopt::quantize_snorm(x, 16) as i16 as u16
+                snorm16(x) as u16
             } else {
                 meshopt::quantize_unorm(x, 16) as u16
             };
@@ -1253,55 +1247,64 @@ fn norm16_attribute<const N: usize>(
     }
 }
 
+/// `x` in [-1, 1] as a signed normalized 16-bit integer, as instance rotations are stored.
+fn snorm16(x: f32) -> i16 {
+    meshopt::quantize_snorm(x, 16) as i16
+}
+
 /// A rotation as a reader decodes it from normalized 16-bit integers ([`norm16_attribute`]):
 /// each component rounded to a multiple of 1/32767, the whole normalised again.
 fn read_back_rotation(q: Quat) -> Quat {
-    let round = |x: f32| f32::from(meshopt::quantize_snorm(x, 16) as i16) / 32767.0;
+    let round = |x: f32| f32::from(snorm16(x)) / 32767.0;
     let back = Vec4::new(round(q.x), round(q.y), round(q.z), round(q.w));
     back.try_normalize().map_or(q, Quat::from_vec4)
 }
 
-/// Positions as unsigned 16-bit integers over their box, with one step for all axes so that
-/// the dequantisation is a uniform scale (which a TRS node or instance can carry); with
-/// `short`, the step rounded up to two significant digits ([`short_step`]).
-fn quantize_positions<I: Iterator<Item = Vec3>>(
-    positions: impl Fn() -> I,
-    short: bool,
-) -> (Attribute, Dequantize) {
-    let mut min = Vec3::splat(f32::INFINITY);
-    let mut max = Vec3::splat(f32::NEG_INFINITY);
-    let mut count = 0;
-    for p in positions() {
-        min = min.min(p);
-        max = max.max(p);
-        count += 1;
+/// The 16-bit grid over the box of `positions`, one step for all axes so that the
+/// dequantisation is a uniform scale (which a TRS node or instance can carry); with `short`,
+/// the step rounded up to two significant digits ([`short_step`]).
+fn grid(positions: impl Iterator<Item = Vec3>, short: bool) -> Dequantize {
+    let mut bounds = Aabb::EMPTY;
+    positions.for_each(|p| bounds.grow(p));
+    if bounds.is_empty() {
+        return Dequantize {
+            offset: Vec3::ZERO,
+            step: 1.0,
+        };
     }
-    if count == 0 {
-        (min, max) = (Vec3::ZERO, Vec3::ZERO);
-    }
-    let extent = (max - min).max_element();
+    let extent = (bounds.max - bounds.min).max_element();
     // A step below f32's normal range rounds positions past the grid's 65,535 steps (and
     // one of zero or infinity has no grid): such a box is stored on a step that fits nothing
     // (infinite), which `fits` refuses, so its positions stay float.
     let step = match extent / STEPS {
         step if step.is_normal() && short => short_step(step),
         step if step.is_normal() => step,
-        _ if count == 0 || extent == 0.0 => 1.0,
+        _ if extent == 0.0 => 1.0,
         _ => f32::INFINITY,
     };
-    let mut bytes = Vec::with_capacity(count * 8);
+    Dequantize {
+        offset: bounds.min,
+        step,
+    }
+}
+
+/// `positions` as unsigned 16-bit integers on grid `d` (see [`grid`]), each padded to 8 bytes.
+fn quantized_attribute(positions: impl Iterator<Item = Vec3>, d: &Dequantize) -> Attribute {
+    let mut bytes = Vec::new();
     let mut lo = [u16::MAX; 3];
     let mut hi = [0u16; 3];
-    for p in positions() {
-        let q = ((p - min) / step).round();
+    let mut count = 0;
+    for p in positions {
+        let q = ((p - d.offset) / d.step).round();
         for c in 0..3 {
-            let x = q[c].clamp(0.0, 65535.0) as u16;
+            let x = q[c].clamp(0.0, STEPS) as u16;
             lo[c] = lo[c].min(x);
             hi[c] = hi[c].max(x);
             bytes.extend_from_slice(&x.to_le_bytes());
         }
         // Vertex attributes must start on 4-byte boundaries, so pad each element to 8 bytes.
         bytes.extend_from_slice(&[0, 0]);
+        count += 1;
     }
     let bounds = (count > 0).then(|| {
         (
@@ -1309,7 +1312,7 @@ fn quantize_positions<I: Iterator<Item = Vec3>>(
             hi.iter().map(|&x| f32::from(x)).collect(),
         )
     });
-    let attribute = Attribute {
+    Attribute {
         bytes,
         stride: 8,
         component_type: UNSIGNED_SHORT,
@@ -1317,8 +1320,7 @@ fn quantize_positions<I: Iterator<Item = Vec3>>(
         type_name: "VEC3",
         count,
         bounds,
-    };
-    (attribute, Dequantize { offset: min, step })
+    }
 }
 
 /// The least number of two significant decimal digits at or above `step` (which it exceeds
