@@ -9,6 +9,7 @@
 //! - [`export`]: the GLB writer, with EXT_mesh_gpu_instancing and optional meshopt compression.
 //! - [`transform`]: decomposition of affine transforms into translation, rotation and scale.
 //! - [`stats`]: the summary printed by `horizon mesh stats`.
+//! - [`rng`]: the seeded SplitMix64 generator every crate and test draws from.
 //! - [`error`]: the typed errors of import and export.
 
 pub mod bake;
@@ -17,6 +18,7 @@ pub mod export;
 pub mod import;
 mod meshopt_stream;
 pub mod model;
+pub mod rng;
 pub mod stats;
 pub mod transform;
 
