@@ -10,16 +10,13 @@
 //! on 34 inches at 24 inches, `horizon_descriptors::calibrate::pixel_solid_angle`), is the
 //! one number every budget follows from.
 //!
-//! **Triangle budget rule** (issue 6 asks for it to be chosen by experiment): one expanded
-//! triangle per `pixels_per_triangle` pixels of that worst case. Triangles smaller than a few
-//! pixels cannot change the image, so a budget proportional to covered pixels bounds the
-//! on-screen error while keeping far-away, small aggregates tiny. The constant 16 (a 4 x 4
-//! pixel footprint per triangle) is the coarsest of 4, 16 and 64 that kept the simplification
-//! error under one pixel at the nearest display distance on the village (median and p95 0.66
-//! px at 16; 2.4 and 2.5 px at 64), while 4 left almost nothing simplified (5 of 1,227
-//! aggregates). The join download barely moves with it (8.28, 8.23, 7.88 MB), because instance
-//! transforms and textures, not triangles, dominate aggregate bytes there. Measured by
-//! `bench/budget_sweep.py`, results in `bench/results/budget_village.md`.
+//! **Triangle budget rule**: one expanded triangle per `pixels_per_triangle` pixels of that
+//! worst case. Triangles smaller than a few pixels cannot change the image, so a budget
+//! proportional to covered pixels bounds the on-screen error while keeping far-away, small
+//! aggregates tiny. The default 16 (a 4 x 4 pixel footprint per triangle) is the coarsest of
+//! those tried that keeps the simplification error under one pixel at the nearest display
+//! distance; finer budgets leave almost nothing simplified. The sweep is
+//! `lab/bench/budget_sweep.py`, its figures `lab/results/budget_village.md`.
 
 use glam::Vec3;
 use horizon_descriptors::calibrate::pixel_solid_angle;

@@ -1,14 +1,8 @@
-//! The offline aggregate rebuild (core paper section 5): every internal... every node of the
-//! BVH gets an aggregate, built bottom-up and in parallel by tree level (rayon).
+//! The offline aggregate rebuild (core paper section 5): every node of the BVH gets an
+//! aggregate, built bottom-up and in parallel by tree level (rayon).
 //!
-//! **Keys and dirty tracking.** Every node has a key: the hash of the options and, for a
-//! leaf, its objects (model content hash and transform), for an internal node, its children's
-//! keys. A key changes exactly when something below the node changed, so after adding,
-//! moving or removing k objects only their ancestors (and nodes a split reshaped) have new
-//! keys; every other aggregate is found in the store under its unchanged key and reused.
-//! Computing the keys hashes each object once (milliseconds for a city); the aggregates
-//! rebuilt are O(k log n). A dirty node whose children were reused reads their handoffs
-//! back from the store's parts files.
+//! A node whose key (`keys.rs`) the store already knows is reused, not rebuilt. A dirty node
+//! whose children were reused reads their handoffs back from the store's parts files.
 
 use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -26,18 +20,14 @@ use horizon_atlas::TextureCache;
 
 use crate::budget::Display;
 use crate::error::AggregateError;
-use crate::generate::{
-    generate_with, ExpandedPart, Handoff, NodeInput, PartKey, Placement, StageSeconds,
-};
+use crate::generate::{generate_with, Handoff, NodeInput, PartKey, Placement, StageSeconds};
+use crate::keys::{node_keys, KeyHasher};
 use crate::options::{AggregateOptions, AtlasPolicy, Method};
 use crate::source::ModelSource;
-use crate::store::{
-    AggregateEntry, AggregateManifest, AggregateStore, Garbage, KeyHasher, PartList,
-};
+use crate::store::{AggregateEntry, AggregateManifest, AggregateStore, PartList};
 
-/// Decoded bytes of source textures a build keeps for its atlases (see [`TextureCache`]).
-/// The city's 2,010 distinct textures decode to 46 MB; decoding them for every aggregate
-/// instead took 31 of the build's core-seconds.
+/// Decoded bytes of source textures a build keeps for its atlases (see [`TextureCache`]):
+/// decoding a texture once per build instead of once per aggregate that samples it.
 const TEXTURE_CACHE_BYTES: usize = 512 << 20;
 
 /// One node's outcome in a level: its entry (if any), its handoff (if built), whether built,
@@ -56,25 +46,12 @@ pub const AUTO_ATLAS_TEXTURES: usize = 100;
 pub const AUTO_ATLAS_BYTES: u64 = 64 * 1024 * 1024;
 
 /// What the rebuild is asked for.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct BuildOptions {
     /// Options of every aggregate.
     pub aggregate: AggregateOptions,
     /// The world's texture count and encoded bytes (for [`AtlasPolicy::Auto`]).
     pub world_textures: (usize, u64),
-    /// Stop with [`AggregateError::Interrupted`] after building this many aggregates,
-    /// without writing the manifest: crash injection for tests.
-    pub stop_after: Option<usize>,
-    /// Build only these nodes (each with every node below it, which its handoffs need), and
-    /// write a manifest of them alone, under a root key of its own so that it is never taken
-    /// for a whole build. `None`: every node. The report uses it for the baseline, whose
-    /// upper aggregates (world-space merges of everything below) do not fit in memory on a
-    /// large world and are in no measured cut.
-    pub only: Option<BTreeSet<u32>>,
-    /// Delete, once the new manifest is written, every file of the store it does not name
-    /// ([`AggregateStore::collect_garbage`]). Off only for a build whose manifest is about
-    /// to be replaced by an earlier one (the incremental benchmark restores the full build's).
-    pub collect_garbage: bool,
 }
 
 /// Progress of a rebuild, for a progress bar.
@@ -109,9 +86,6 @@ pub struct BuildReport {
     pub levels: usize,
     /// Per level, root first: aggregates built and the wall time spent on the level.
     pub level_times: Vec<LevelTime>,
-    /// Files of earlier builds that the new manifest no longer names, deleted.
-    #[serde(default)]
-    pub removed: Garbage,
     /// The stages' times summed over the aggregates built (core-seconds: the nodes of a level
     /// run in parallel).
     #[serde(default)]
@@ -134,14 +108,51 @@ pub struct LevelTime {
     pub stages: StageSeconds,
 }
 
+/// What a rebuild did, and the manifest it wrote.
+#[derive(Clone, Debug)]
+pub struct BuildOutcome {
+    /// What the rebuild did.
+    pub report: BuildReport,
+    /// The manifest it wrote last, naming every node's aggregate.
+    pub manifest: AggregateManifest,
+}
+
 /// Builds (or reuses) the aggregate of every node of `bvh` into `store`.
 pub fn build_aggregates(
     bvh: &Bvh,
     models: &dyn ModelSource,
-    store: &AggregateStore,
+    store: &dyn AggregateStore,
     options: &BuildOptions,
     progress: &(dyn Fn(Progress) + Sync),
-) -> Result<BuildReport, AggregateError> {
+) -> Result<BuildOutcome, AggregateError> {
+    build(bvh, models, store, options, None, progress)
+}
+
+/// Builds only `roots` and every node below them (which their handoffs need), and writes a
+/// manifest of them alone, under a root key of its own so that it is never taken for a whole
+/// build. The report's baseline uses it: its upper aggregates (world-space merges of
+/// everything below) do not fit in memory on a large world and are in no measured cut.
+#[cfg(feature = "baseline")]
+pub fn build_subtrees(
+    bvh: &Bvh,
+    models: &dyn ModelSource,
+    store: &dyn AggregateStore,
+    options: &BuildOptions,
+    roots: &BTreeSet<u32>,
+    progress: &(dyn Fn(Progress) + Sync),
+) -> Result<BuildOutcome, AggregateError> {
+    build(bvh, models, store, options, Some(roots), progress)
+}
+
+/// The rebuild of every node, or of the subtrees under `only`.
+fn build(
+    bvh: &Bvh,
+    models: &dyn ModelSource,
+    store: &dyn AggregateStore,
+    options: &BuildOptions,
+    only: Option<&BTreeSet<u32>>,
+    progress: &(dyn Fn(Progress) + Sync),
+) -> Result<BuildOutcome, AggregateError> {
     let start = Instant::now();
     options
         .aggregate
@@ -152,7 +163,7 @@ pub fn build_aggregates(
     let table = Table1::calibrated();
     let levels = levels(bvh);
     let keys = node_keys(bvh, models, &levels, &options.aggregate, atlas, &table)?;
-    let only = options.only.as_ref().map(|roots| closed_below(bvh, roots));
+    let only = only.map(|roots| closed_below(bvh, roots));
     let root_key = match &only {
         None => keys.get(&bvh.root()).cloned().unwrap_or_default(),
         // A partial build's key names the nodes it holds.
@@ -176,7 +187,9 @@ pub fn build_aggregates(
     };
     let total: usize = levels.iter().map(Vec::len).sum();
     // Stage 2: what the store already has.
+    #[cfg_attr(not(feature = "baseline"), allow(unused_mut))]
     let mut known = store.known()?;
+    #[cfg(feature = "baseline")]
     if options.aggregate.method == Method::Unoptimized {
         // Baseline handoffs are not persisted: reuse all of a matching build or nothing.
         // A build with failed nodes lacks them in its manifest, and their parents lack their
@@ -192,7 +205,6 @@ pub fn build_aggregates(
     }
     // Stage 3: bottom-up, one level at a time, nodes of a level in parallel.
     let done = AtomicUsize::new(0);
-    let built_count = AtomicUsize::new(0);
     let mut entries: BTreeMap<u32, AggregateEntry> = BTreeMap::new();
     let mut report = BuildReport {
         nodes: total,
@@ -222,11 +234,6 @@ pub fn build_aggregates(
                         total,
                     });
                     return Ok((node, Some(e.clone()), None, false, StageSeconds::default()));
-                }
-                if let Some(limit) = options.stop_after {
-                    if built_count.load(Ordering::SeqCst) >= limit {
-                        return Err(AggregateError::Interrupted(limit));
-                    }
                 }
                 let read = Instant::now();
                 let children = child_handoffs(
@@ -258,7 +265,6 @@ pub fn build_aggregates(
                         stages.write = writing.elapsed().as_secs_f64();
                         Ok((entry, out.handoff, stages))
                     });
-                built_count.fetch_add(1, Ordering::SeqCst);
                 done.fetch_add(1, Ordering::Relaxed);
                 progress(Progress {
                     done: done.load(Ordering::Relaxed),
@@ -335,11 +341,8 @@ pub fn build_aggregates(
         nodes: entries,
     };
     store.write_manifest(&manifest)?;
-    if options.collect_garbage {
-        report.removed = store.collect_garbage(&manifest)?;
-    }
     report.seconds = start.elapsed().as_secs_f64();
-    Ok(report)
+    Ok(BuildOutcome { report, manifest })
 }
 
 /// `roots` and every node below them.
@@ -387,65 +390,6 @@ pub fn levels(bvh: &Bvh) -> Vec<Vec<NodeId>> {
         current = next;
     }
     out
-}
-
-/// Every node's key, bottom-up.
-pub fn node_keys(
-    bvh: &Bvh,
-    models: &dyn ModelSource,
-    levels: &[Vec<NodeId>],
-    options: &AggregateOptions,
-    atlas: bool,
-    table: &Table1,
-) -> Result<HashMap<NodeId, String>, AggregateError> {
-    // Table 1's thresholds decide every dedup: a recalibrated table changes every key.
-    let fingerprint = format!(
-        "{}|atlas={atlas}|table1={:?}",
-        options.fingerprint(),
-        table.rows
-    );
-    let mut keys: HashMap<NodeId, String> = HashMap::new();
-    for level in levels.iter().rev() {
-        let computed: Vec<(NodeId, String)> = level
-            .par_iter()
-            .map(|&n| -> Result<(NodeId, String), AggregateError> {
-                let node = bvh
-                    .node(n)
-                    .ok_or_else(|| AggregateError::Tree(format!("no node {}", n.0)))?;
-                let mut parts: Vec<Vec<u8>> = Vec::new();
-                if node.is_leaf() {
-                    for o in node.objects() {
-                        let obj = bvh
-                            .object(o)
-                            .ok_or_else(|| AggregateError::Tree(format!("no object {}", o.0)))?;
-                        let mut bytes = models.model(obj.model())?.hash.clone().into_bytes();
-                        for v in obj.transform().to_cols_array() {
-                            bytes.extend_from_slice(&v.to_bits().to_le_bytes());
-                        }
-                        parts.push(bytes);
-                    }
-                } else {
-                    for c in node.child_nodes() {
-                        let k = keys
-                            .get(&c)
-                            .ok_or_else(|| AggregateError::Tree(format!("no key for {}", c.0)))?;
-                        parts.push(k.clone().into_bytes());
-                    }
-                }
-                parts.sort();
-                let mut h = KeyHasher::new();
-                h.write(fingerprint.as_bytes());
-                h.write(if node.is_leaf() { b"L" } else { b"I" });
-                for p in &parts {
-                    h.write(&(p.len() as u64).to_le_bytes());
-                    h.write(p);
-                }
-                Ok((n, h.finish_hex()))
-            })
-            .collect::<Result<_, _>>()?;
-        keys.extend(computed);
-    }
-    Ok(keys)
 }
 
 /// The input of one node's aggregate.
@@ -501,7 +445,7 @@ fn child_handoffs(
     below: &HashMap<NodeId, Arc<Handoff>>,
     below_entries: &HashMap<NodeId, AggregateEntry>,
     keys: &HashMap<NodeId, String>,
-    store: &AggregateStore,
+    store: &dyn AggregateStore,
     models: &dyn ModelSource,
     method: Method,
 ) -> Vec<Arc<Handoff>> {
@@ -594,45 +538,25 @@ fn encode_parts(
 /// entry (the parent then falls back to the source models, or, for the baseline, goes
 /// without the child).
 fn decode_parts(
-    store: &AggregateStore,
+    store: &dyn AggregateStore,
     entry: &AggregateEntry,
     models: &dyn ModelSource,
     method: Method,
 ) -> Option<Handoff> {
     let hash = entry.parts.as_ref()?;
-    let bytes = std::fs::read(store.parts(hash)).ok()?;
+    let bytes = store.parts(hash).ok()?;
     let mesh = import_bytes(&bytes, Format::Glb, None, &ImportOptions::trusted())
         .ok()?
         .mesh;
     if mesh.submeshes.len() != entry.part_keys.len() {
         return None;
     }
+    #[cfg(feature = "baseline")]
     if method == Method::Unoptimized {
-        let mut material_keys: Vec<(u64, usize)> = Vec::new();
-        let mut index: HashMap<(u64, usize), usize> = HashMap::new();
-        let mut submeshes = Vec::with_capacity(mesh.submeshes.len());
-        for (sub, (hash, m)) in mesh.submeshes.into_iter().zip(&entry.part_keys) {
-            let material = if hash.is_empty() {
-                None
-            } else {
-                let key = (models.by_hash(hash)?, *m as usize);
-                Some(*index.entry(key).or_insert_with(|| {
-                    material_keys.push(key);
-                    material_keys.len() - 1
-                }))
-            };
-            submeshes.push(Submesh { material, ..sub });
-        }
-        return Some(Handoff::Expanded(Arc::new(ExpandedPart {
-            mesh: InstancedMesh {
-                submeshes,
-                instances: mesh.instances,
-                materials: Vec::new(),
-                textures: Vec::new(),
-            },
-            material_keys,
-        })));
+        return crate::baseline::decode_expanded(mesh, entry, models);
     }
+    #[cfg(not(feature = "baseline"))]
+    let _ = method;
     let mut versions: BTreeMap<PartKey, Arc<Submesh>> = BTreeMap::new();
     for (sub, (hash, s)) in mesh.submeshes.into_iter().zip(&entry.part_keys) {
         let model = models.by_hash(hash)?;

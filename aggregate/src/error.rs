@@ -56,10 +56,6 @@ pub enum AggregateError {
         /// What is wrong with it.
         reason: String,
     },
-    /// The build was stopped on purpose after a number of aggregates (crash injection in
-    /// tests).
-    #[error("build interrupted after {0} aggregates")]
-    Interrupted(usize),
 }
 
 impl AggregateError {

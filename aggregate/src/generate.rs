@@ -22,7 +22,7 @@ use glam::{Affine3A, Vec3};
 use horizon_atlas::{build_atlas_with, AtlasOptions, TextureCache};
 use horizon_descriptors::calibrate::Table1;
 use horizon_mesh::{export_glb, ExportOptions, Instance, InstancedMesh, Material, Submesh};
-use horizon_simplify::{simplify, simplify_qem, SimplifyOptions, Target};
+use horizon_simplify::{simplify, SimplifyOptions, Target};
 use serde::{Deserialize, Serialize};
 
 use crate::budget::{dedup_distance, Display};
@@ -255,7 +255,8 @@ pub fn generate_with(
 ) -> Result<NodeOutput, AggregateError> {
     match options.method {
         Method::Optimized => generate_optimized(input, models, table, options, textures),
-        Method::Unoptimized => generate_unoptimized(input, models, options),
+        #[cfg(feature = "baseline")]
+        Method::Unoptimized => crate::baseline::generate_unoptimized(input, models, options),
     }
 }
 
@@ -417,71 +418,6 @@ fn generate_optimized(
     Ok(out)
 }
 
-/// The unoptimised baseline: children expanded into one mesh, QEM to the same budget.
-fn generate_unoptimized(
-    input: &NodeInput,
-    models: &dyn ModelSource,
-    options: &AggregateOptions,
-) -> Result<NodeOutput, AggregateError> {
-    let start = Instant::now();
-    let mut stats = NodeStats {
-        placements: input.placements.len(),
-        budget: input.display.triangle_budget(options),
-        ..NodeStats::default()
-    };
-    let mut merge = Merger::default();
-    if input.children.is_empty() {
-        let sources = load_models(input.placements.iter().map(|p| p.model), models)?;
-        stats.models = sources.len();
-        for p in &input.placements {
-            let source = &sources[&p.model];
-            for (s, inner) in source.placements.iter().enumerate() {
-                let index = merge.submesh(p.model, source, source.mesh.submeshes[s].clone());
-                for m in inner {
-                    merge.mesh.instances.push(Instance {
-                        submesh: index,
-                        transform: p.transform * *m,
-                    });
-                }
-            }
-        }
-    } else {
-        for child in &input.children {
-            let Handoff::Expanded(part) = child.as_ref() else {
-                continue;
-            };
-            merge.expanded(part, models)?;
-        }
-    }
-    let material_keys = merge.material_keys.clone();
-    let merged = merge.mesh;
-    stats.triangles_in = merged.expanded_triangle_count();
-    let target = Target::Triangles(stats.budget.min(stats.triangles_in));
-    let result = simplify_qem(&merged, target, &SimplifyOptions::default()).map_err(|source| {
-        AggregateError::Simplify {
-            node: input.node,
-            source,
-        }
-    })?;
-    stats.error = result.report.error;
-    stats.error_pixels = input.display.pixels_of_length(result.report.error);
-    let simplified = result.mesh;
-    // The parent takes materials and textures from the source models (`material_keys`):
-    // the handoff keeps geometry only.
-    let handoff = Handoff::Expanded(Arc::new(ExpandedPart {
-        mesh: InstancedMesh {
-            submeshes: simplified.submeshes.clone(),
-            instances: simplified.instances.clone(),
-            materials: Vec::new(),
-            textures: Vec::new(),
-        },
-        material_keys,
-    }));
-    let mut out = finish(input, simplified, handoff, stats)?;
-    out.stats.seconds = start.elapsed().as_secs_f64();
-    Ok(out)
-}
-
 /// How far, in pixels as near as the aggregate's geometry can be shown
 /// (`Display::nearest_length_of_pixels`), storing its positions as 16-bit integers may move a
 /// vertex (`ExportOptions::position_tolerance`). An eighth of a pixel is under the 8-bit
@@ -490,7 +426,7 @@ fn generate_unoptimized(
 pub const POSITION_PIXELS: f64 = 0.125;
 
 /// Encodes the aggregate and fills in its counts.
-fn finish(
+pub(crate) fn finish(
     input: &NodeInput,
     mesh: InstancedMesh,
     handoff: Handoff,
@@ -559,7 +495,7 @@ fn cull(input: &NodeInput, options: &AggregateOptions) -> Vec<Placement> {
 }
 
 /// Every distinct model of `ids`, loaded once.
-fn load_models(
+pub(crate) fn load_models(
     ids: impl Iterator<Item = u64>,
     models: &dyn ModelSource,
 ) -> Result<BTreeMap<u64, Arc<SourceModel>>, AggregateError> {
@@ -606,17 +542,17 @@ fn dedup_plan(
 /// Accumulates submeshes, materials and textures from several sources, sharing each source
 /// material and texture once.
 #[derive(Debug, Default)]
-struct Merger {
-    mesh: InstancedMesh,
+pub(crate) struct Merger {
+    pub(crate) mesh: InstancedMesh,
     materials: HashMap<(u64, usize), usize>,
     textures: HashMap<(u64, usize), usize>,
-    material_keys: Vec<(u64, usize)>,
+    pub(crate) material_keys: Vec<(u64, usize)>,
 }
 
 impl Merger {
     /// Adds `sub` (a submesh of `source`, or a version of one) with its material; returns
     /// its index.
-    fn submesh(&mut self, model: u64, source: &SourceModel, mut sub: Submesh) -> usize {
+    pub(crate) fn submesh(&mut self, model: u64, source: &SourceModel, mut sub: Submesh) -> usize {
         sub.material = sub
             .material
             .and_then(|m| self.material(model, m, &source.mesh));
@@ -626,7 +562,7 @@ impl Merger {
 
     /// The merged index of material `m` of `model` (found at that index of `from`, the
     /// model's mesh), adding it and its texture, each shared by (model, index), if new.
-    fn material(&mut self, model: u64, m: usize, from: &InstancedMesh) -> Option<usize> {
+    pub(crate) fn material(&mut self, model: u64, m: usize, from: &InstancedMesh) -> Option<usize> {
         let key = (model, m);
         if let Some(&i) = self.materials.get(&key) {
             return Some(i);
@@ -650,34 +586,5 @@ impl Merger {
         let i = self.mesh.materials.len() - 1;
         self.materials.insert(key, i);
         Some(i)
-    }
-
-    /// Appends a child's expanded baseline mesh, sharing materials by source: each material
-    /// (and its texture) comes from the source model it names, as a leaf takes it, so no
-    /// handoff carries texture bytes.
-    fn expanded(
-        &mut self,
-        part: &ExpandedPart,
-        models: &dyn ModelSource,
-    ) -> Result<(), AggregateError> {
-        let base = self.mesh.submeshes.len();
-        for sub in &part.mesh.submeshes {
-            let mut sub = sub.clone();
-            sub.material = match sub.material.and_then(|m| part.material_keys.get(m)) {
-                Some(&(model, source_m)) => {
-                    let source = models.model(model)?;
-                    self.material(model, source_m, &source.mesh)
-                }
-                None => None,
-            };
-            self.mesh.submeshes.push(sub);
-        }
-        for inst in &part.mesh.instances {
-            self.mesh.instances.push(Instance {
-                submesh: base + inst.submesh,
-                transform: inst.transform,
-            });
-        }
-        Ok(())
     }
 }

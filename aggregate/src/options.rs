@@ -20,8 +20,9 @@ pub enum AtlasPolicy {
 pub enum Method {
     /// The optimised pipeline: dedup, instanced merge, IAS, atlas.
     Optimized,
-    /// The "unoptimised aggregates" baseline of issue 6: no dedup, the children expanded into
-    /// one mesh, classic QEM to the same budget, no atlas.
+    /// The unoptimised baseline (`baseline.rs`, feature `baseline`): no dedup, the children
+    /// expanded into one mesh, classic QEM to the same budget, no atlas.
+    #[cfg(feature = "baseline")]
     Unoptimized,
 }
 
@@ -31,7 +32,7 @@ pub enum Method {
 pub struct AggregateOptions {
     /// The smallest solid angle (steradians) a client asks to see as itself. It fixes how
     /// close an aggregate can be shown (`budget.rs`), hence its triangle and texel budgets.
-    /// Default 1e-3, the cut query's default.
+    /// Default: the cut's, [`horizon_bvh::DEFAULT_MIN_SOLID_ANGLE`].
     pub min_solid_angle: f64,
     /// The largest solid angle at which an aggregate is returned, for the dedup distance of
     /// section 5.1 (the paper's `Omega = 1.0`).
@@ -60,7 +61,7 @@ pub struct AggregateOptions {
 impl Default for AggregateOptions {
     fn default() -> Self {
         Self {
-            min_solid_angle: 1e-3,
+            min_solid_angle: horizon_bvh::DEFAULT_MIN_SOLID_ANGLE,
             dedup_solid_angle: 1.0,
             pixels_per_triangle: 16.0,
             cull_pixels: 1.0,
@@ -75,6 +76,7 @@ impl Default for AggregateOptions {
 
 impl AggregateOptions {
     /// The unoptimised baseline with the same display model and budget.
+    #[cfg(feature = "baseline")]
     pub fn unoptimized(&self) -> Self {
         Self {
             dedup: false,

@@ -19,6 +19,13 @@ use crate::bounds::{Aabb, Sphere};
 use crate::solid_angle::{solid_angle, worst_case_solid_angle};
 use crate::tree::{Bvh, Node, NodeId, NodeKind, ObjectId, NONE};
 
+/// The smallest solid angle (steradians) a client sees as itself unless it asks for another:
+/// an object of 1 m radius at 56 m. The aggregates' budgets assume it too.
+pub const DEFAULT_MIN_SOLID_ANGLE: f64 = 1e-3;
+
+/// The most entries a cut holds unless a client asks for another number.
+pub const DEFAULT_MAX_RESULTS: usize = 4000;
+
 /// A client's view request.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct CutQuery {

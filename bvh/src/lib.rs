@@ -20,8 +20,8 @@
 //! - `cut.rs`: [`Bvh::cut`], best-first refinement by worst-case solid angle.
 //! - `standing.rs`: [`StandingQuery`], a per-client cut kept up to date with ordered
 //!   [`CutDelta`]s and hysteresis (Sirikata's `RTreeCutQueryHandler`).
-//! - [`spatial`]: [`SpatialBaseline`], the same objects in an `obvhs` SAH BVH with the same
-//!   cut, the query-cost baseline.
+//! - `spatial.rs` (feature `baseline`, for the lab only): `SpatialBaseline`, the same objects
+//!   in an `obvhs` SAH BVH with the same cut, the query-cost baseline.
 //! - `validate.rs`: [`Bvh::validate`], every structural invariant.
 //! - [`solid_angle`]: eq. 3 and the max-sphere worst case.
 //! - [`bounds`]: spheres, boxes and the sphere fit.
@@ -35,6 +35,7 @@ mod insert;
 pub mod options;
 mod remove;
 pub mod solid_angle;
+#[cfg(feature = "baseline")]
 pub mod spatial;
 mod split;
 mod standing;
@@ -42,10 +43,14 @@ mod tree;
 mod validate;
 
 pub use bounds::{Aabb, Sphere};
-pub use cut::{Cut, CutEntry, CutItem, CutQuery, CutWorkspace, EntryKind};
+pub use cut::{
+    Cut, CutEntry, CutItem, CutQuery, CutWorkspace, EntryKind, DEFAULT_MAX_RESULTS,
+    DEFAULT_MIN_SOLID_ANGLE,
+};
 pub use error::{BvhError, InvalidTree};
-pub use options::BvhOptions;
+pub use options::{BvhOptions, DEFAULT_MU, DEFAULT_W, MAX_BRANCHING};
 pub use solid_angle::{solid_angle, worst_case_solid_angle};
+#[cfg(feature = "baseline")]
 pub use spatial::{SpatialBaseline, SpatialCut, SpatialEntry, SpatialItem, SpatialWorkspace};
 pub use standing::{apply_deltas, CutDelta, StandingOptions, StandingQuery, UpdateStats};
 pub use tree::{Bvh, NewObject, NodeId, NodeRef, ObjectId, ObjectRef};

@@ -9,6 +9,13 @@ use crate::BvhError;
 /// groups) lives in fixed arrays of this size on the stack, so an insert never allocates.
 pub const MAX_BRANCHING: usize = 64;
 
+/// Eq. 1's default mu, the weight of similarity against volume: the paper's choice from its
+/// Figures 5 and 6.
+pub const DEFAULT_MU: f32 = 0.8;
+
+/// Eq. 1's default w, the weight of texture against shape: the paper's choice.
+pub const DEFAULT_W: f32 = 0.2;
+
 /// How the tree is shaped and how eq. 1 weighs similarity against volume.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct BvhOptions {
@@ -22,11 +29,11 @@ pub struct BvhOptions {
     /// exceed `leaf_size` (nor, therefore, `max_children`).
     pub min_children: usize,
     /// Eq. 1's mu: the weight of descriptor similarity against volume growth, in [0, 1].
-    /// The paper's Figures 5 and 6 choose 0.8. At 1 the tree groups by descriptors only; at 0
-    /// it is a plain R-tree.
+    /// Default [`DEFAULT_MU`]. At 1 the tree groups by descriptors only; at 0 it is a plain
+    /// R-tree.
     pub mu: f32,
     /// Eq. 1's w: the weight of texture against shape within the similarity term, in [0, 1].
-    /// The paper chooses 0.2.
+    /// Default [`DEFAULT_W`].
     pub w: f32,
     /// The shape (Zernike L2) distance that counts as one unit in eq. 1. Default 0.5: the
     /// coarsest `z_diff` of the paper's Table 1, the largest shape difference still
@@ -54,7 +61,8 @@ impl Default for BvhOptions {
 
 impl BvhOptions {
     /// Defaults for a branching factor `max_children`: min fill 40% (at least 1), leaf size
-    /// 80% (at least twice the min fill, at most the branching factor), mu 0.8, w 0.2.
+    /// 80% (at least twice the min fill, at most the branching factor), [`DEFAULT_MU`],
+    /// [`DEFAULT_W`].
     pub fn with_branching(max_children: usize) -> Self {
         // 40% min fill, but never so high that a bulk-built leaf cannot hold two minimum
         // groups (leaf_size >= 2 * min_children, see `bulk.rs`).
@@ -64,8 +72,8 @@ impl BvhOptions {
         Self {
             max_children,
             min_children,
-            mu: 0.8,
-            w: 0.2,
+            mu: DEFAULT_MU,
+            w: DEFAULT_W,
             shape_scale: 0.5,
             texture_scale: 500.0,
             leaf_size: leaf_size.min(max_children),

@@ -1,6 +1,7 @@
 //! The spatial baseline (an `obvhs` SAH BVH with max-sphere bounds): its cut keeps the
 //! complete-view invariant and the budget, and shows as themselves the same objects as the
 //! similarity-aware tree's cut whenever the budget does not bind.
+#![cfg(feature = "baseline")]
 
 mod common;
 

@@ -1,5 +1,5 @@
 //! `horizon demo`: the main job on an embedded default, so a fresh clone shows what Horizon
-//! does with no input of its own. For now it
+//! does with no input of its own. It
 //! 1. imports the embedded models, prints their statistics and writes each as plain and as
 //!    compressed GLB;
 //! 2. computes the shape and texture descriptors of those models and of two seeds of a
@@ -8,13 +8,16 @@
 //!    triangles with instance-aware simplification (IAS) and with the quadric baseline on the
 //!    expanded mesh, printing time, output size and error side by side;
 //! 4. generates the village world, builds its BVH and every aggregate (the offline rebuild),
-//!    and prints the join-download report against the naive client and unoptimised
-//!    aggregates.
+//!    and cuts it for a viewer standing in it.
 
 use std::path::Path;
 
 use anyhow::Context;
+use horizon_aggregate::AggregateOptions;
+use horizon_bvh::{CutItem, CutQuery, DEFAULT_MU, DEFAULT_W};
 use horizon_mesh::{export_glb, import_bytes, ExportOptions, Format, ImportOptions, MeshStats};
+use horizon_server::outln;
+use horizon_world::write_atomically;
 
 /// Embedded default models (third-party; licences in `assets/models/`).
 const MODELS: &[(&str, &[u8])] = &[
@@ -35,22 +38,25 @@ const MODELS: &[(&str, &[u8])] = &[
 /// Runs the demo and writes its output under `out`.
 pub fn run(out: &Path) -> anyhow::Result<()> {
     std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
-    println!(
+    outln!(
         "{:<20} {:>9} {:>9} {:>10} {:>10} {:>10} {:>10}",
-        "model", "submeshes", "instances", "tris uniq", "tris exp", "plain B", "compr. B"
-    );
+        "model",
+        "submeshes",
+        "instances",
+        "tris uniq",
+        "tris exp",
+        "plain B",
+        "compr. B"
+    )?;
     for (name, bytes) in MODELS {
         let imported = import_bytes(bytes, Format::Glb, None, &ImportOptions::default())
             .with_context(|| format!("embedded model {name}"))?;
         let stats = MeshStats::of(&imported.mesh);
         let plain = export_glb(&imported.mesh, &ExportOptions::plain())?;
         let compressed = export_glb(&imported.mesh, &ExportOptions::compressed())?;
-        crate::mesh_cmd::write_atomically(&out.join(format!("{name}.glb")), &plain)?;
-        crate::mesh_cmd::write_atomically(
-            &out.join(format!("{name}.compressed.glb")),
-            &compressed,
-        )?;
-        println!(
+        write_atomically(&out.join(format!("{name}.glb")), &plain)?;
+        write_atomically(&out.join(format!("{name}.compressed.glb")), &compressed)?;
+        outln!(
             "{:<20} {:>9} {:>9} {:>10} {:>10} {:>10} {:>10}",
             name,
             stats.submeshes,
@@ -59,30 +65,61 @@ pub fn run(out: &Path) -> anyhow::Result<()> {
             stats.triangles_expanded,
             plain.len(),
             compressed.len()
-        );
+        )?;
     }
-    println!("wrote plain and compressed GLB files to {}", out.display());
+    outln!("wrote plain and compressed GLB files to {}", out.display())?;
     descriptors()?;
     simplification(out)?;
     world(out)
 }
 
-/// Stage 4: the village world, built and reported.
+/// Stage 4: the village world, generated, built, and cut for a viewer at its centre.
 fn world(out: &Path) -> anyhow::Result<()> {
-    println!();
-    println!("the village world: generate, build the BVH and every aggregate, report");
+    outln!()?;
+    outln!("the village world: generate, build the BVH and every aggregate, cut")?;
     let dir = out.join("village");
     if dir.exists() {
         std::fs::remove_dir_all(&dir).with_context(|| format!("cannot clear {}", dir.display()))?;
     }
-    crate::world_cmd::gen_world("village", &dir, 1, None)?;
-    let args = crate::aggregate_cmd::AggregateArgs {
-        pixels_per_triangle: 16.0,
-        min_solid_angle: 1e-3,
-        atlas: horizon_aggregate::AtlasPolicy::Always,
-    };
-    crate::world_cmd::build(&dir, 0.8, 0.2, Some(args), false)?;
-    crate::aggregate_cmd::report(&dir, 10, 1, 1e-3, 4000, false)
+    let generated = horizon_server::generated::write_world("village", &dir, 1, &[])?;
+    outln!(
+        "village -> {}: {} objects, {} unique models",
+        dir.display(),
+        generated.world.objects().len(),
+        generated.world.manifest().models.len()
+    )?;
+    let options = AggregateOptions::default();
+    crate::world_cmd::build(&dir, DEFAULT_MU, DEFAULT_W, Some(options), false)?;
+    let mut world = horizon_world::World::open(&dir)?;
+    let bvh = world.load_tree()?;
+    let bounds = bvh
+        .node(bvh.root())
+        .map(|n| n.aabb())
+        .context("the village is empty")?;
+    let centre = (bounds.min + bounds.max) * 0.5;
+    let eye = glam::Vec3::new(centre.x, 2.0, centre.z);
+    let cut = world.cut(&CutQuery {
+        position: eye,
+        min_solid_angle: options.min_solid_angle as f32,
+        max_results: 4000,
+    })?;
+    let aggregates = cut
+        .entries
+        .iter()
+        .filter(|e| matches!(e.item, CutItem::Aggregate(_)))
+        .count();
+    outln!(
+        "a viewer at {eye} sees all {} objects as {} entries: {} objects as themselves, {} aggregates",
+        world.objects().len(),
+        cut.entries.len(),
+        cut.entries.len() - aggregates,
+        aggregates
+    )?;
+    outln!(
+        "(the join download against naive and unoptimised aggregates: horizon-lab report {})",
+        dir.display()
+    )?;
+    Ok(())
 }
 
 /// Stage 2: descriptors of the embedded and generated models, and which pairs the calibrated
@@ -90,8 +127,8 @@ fn world(out: &Path) -> anyhow::Result<()> {
 fn descriptors() -> anyhow::Result<()> {
     use horizon_descriptors::calibrate::Table1;
     use horizon_descriptors::{describe, t_diff, z_diff, DescriptorOptions};
-    println!();
-    println!("descriptors (3D Zernike 121 + Color Structure 32), one core");
+    outln!()?;
+    outln!("descriptors (3D Zernike 121 + Color Structure 32), one core")?;
     let mut models = Vec::new();
     for (name, bytes) in MODELS {
         let mesh = import_bytes(bytes, Format::Glb, None, &ImportOptions::default())?.mesh;
@@ -106,22 +143,22 @@ fn descriptors() -> anyhow::Result<()> {
     let mut described = Vec::new();
     for (name, mesh) in &models {
         let r = describe(mesh, &DescriptorOptions::default())?;
-        println!(
+        outln!(
             "{:<20} {:>8} voxels {:>7.1} ms",
             name,
             r.voxels,
             r.seconds * 1e3
-        );
+        )?;
         described.push((name, r.descriptors));
     }
     let table = Table1::calibrated();
     let smallest = table.rows.first().map_or(0.0, |r| r.max_solid_angle * 0.5);
-    println!("pair                                      z_diff   t_diff  dedup when tiny");
+    outln!("pair                                      z_diff   t_diff  dedup when tiny")?;
     for i in 0..described.len() {
         for j in i + 1..described.len() {
             let (a, b) = (&described[i], &described[j]);
             let (z, t) = (z_diff(&a.1, &b.1), t_diff(&a.1, &b.1));
-            println!(
+            outln!(
                 "{:<40} {:>8.4} {:>8.1}  {}",
                 format!("{} / {}", a.0, b.0),
                 z,
@@ -131,7 +168,7 @@ fn descriptors() -> anyhow::Result<()> {
                 } else {
                     "no"
                 }
-            );
+            )?;
         }
     }
     Ok(())
@@ -140,14 +177,22 @@ fn descriptors() -> anyhow::Result<()> {
 /// Stage 3: IAS against the quadric baseline on the generated Table 2 models.
 fn simplification(out: &Path) -> anyhow::Result<()> {
     use horizon_simplify::{simplify, simplify_qem, SimplifyOptions, Target};
-    println!();
-    println!(
+    outln!()?;
+    outln!(
         "simplification to 20% of the expanded triangles (IAS vs quadric on the expanded mesh)"
-    );
-    println!(
+    )?;
+    outln!(
         "{:<13} {:>10} {:>8} {:>9} {:>9} {:>11} {:>11} {:>10} {:>10}",
-        "model", "tris exp", "instances", "IAS s", "QEM s", "IAS B", "QEM B", "IAS err", "QEM err"
-    );
+        "model",
+        "tris exp",
+        "instances",
+        "IAS s",
+        "QEM s",
+        "IAS B",
+        "QEM B",
+        "IAS err",
+        "QEM err"
+    )?;
     let options = SimplifyOptions::default();
     for name in horizon_worldgen::MODEL_NAMES {
         let mesh = horizon_worldgen::generate_model(name, 1)?;
@@ -156,9 +201,9 @@ fn simplification(out: &Path) -> anyhow::Result<()> {
         let qem = simplify_qem(&mesh, Target::Ratio(0.2), &options)?;
         let ias_glb = export_glb(&ias.mesh, &ExportOptions::plain())?;
         let qem_glb = export_glb(&qem.mesh, &ExportOptions::plain())?;
-        crate::mesh_cmd::write_atomically(&out.join(format!("{name}.ias.glb")), &ias_glb)?;
-        crate::mesh_cmd::write_atomically(&out.join(format!("{name}.qem.glb")), &qem_glb)?;
-        println!(
+        write_atomically(&out.join(format!("{name}.ias.glb")), &ias_glb)?;
+        write_atomically(&out.join(format!("{name}.qem.glb")), &qem_glb)?;
+        outln!(
             "{:<13} {:>10} {:>8} {:>9.3} {:>9.3} {:>11} {:>11} {:>10.2e} {:>10.2e}",
             name,
             ias.report.triangles_in,
@@ -169,8 +214,8 @@ fn simplification(out: &Path) -> anyhow::Result<()> {
             qem_glb.len(),
             ias.report.error / diagonal,
             qem.report.error / diagonal,
-        );
+        )?;
     }
-    println!("errors are quadric errors (RMS distance) over the bounding-box diagonal; wrote *.ias.glb and *.qem.glb");
+    outln!("errors are quadric errors (RMS distance) over the bounding-box diagonal; wrote *.ias.glb and *.qem.glb")?;
     Ok(())
 }

@@ -3,8 +3,9 @@
 use std::path::Path;
 use std::time::Instant;
 
-use anyhow::Context;
 use horizon_mesh::{export_glb, import_file, ExportOptions, ImportOptions, MeshStats};
+use horizon_server::outln;
+use horizon_world::write_atomically;
 use serde::Serialize;
 
 /// Prints the statistics of a model file.
@@ -13,26 +14,22 @@ pub fn stats(file: &Path, json: bool) -> anyhow::Result<()> {
     for w in &imported.warnings {
         eprintln!("horizon: warning: {w}");
     }
-    let stats = MeshStats::of(&imported.mesh);
+    let s = MeshStats::of(&imported.mesh);
     if json {
-        println!("{}", serde_json::to_string(&stats)?);
-    } else {
-        print_stats(&stats);
+        outln!("{}", serde_json::to_string(&s)?)?;
+        return Ok(());
+    }
+    outln!("submeshes           {}", s.submeshes)?;
+    outln!("instances           {}", s.instances)?;
+    outln!("triangles unique    {}", s.triangles_unique)?;
+    outln!("triangles expanded  {}", s.triangles_expanded)?;
+    outln!("materials           {}", s.materials)?;
+    outln!("textures            {}", s.textures)?;
+    match (s.bounds.min, s.bounds.max) {
+        (Some(min), Some(max)) => outln!("bounds              {min:?} .. {max:?}")?,
+        _ => outln!("bounds              empty")?,
     }
     Ok(())
-}
-
-fn print_stats(s: &MeshStats) {
-    println!("submeshes           {}", s.submeshes);
-    println!("instances           {}", s.instances);
-    println!("triangles unique    {}", s.triangles_unique);
-    println!("triangles expanded  {}", s.triangles_expanded);
-    println!("materials           {}", s.materials);
-    println!("textures            {}", s.textures);
-    match (s.bounds.min, s.bounds.max) {
-        (Some(min), Some(max)) => println!("bounds              {min:?} .. {max:?}"),
-        _ => println!("bounds              empty"),
-    }
 }
 
 /// What `horizon mesh convert --json` prints.
@@ -72,12 +69,12 @@ pub fn convert(input: &Path, output: &Path, compress: bool, json: bool) -> anyho
         stats: MeshStats::of(&imported.mesh),
     };
     if json {
-        println!("{}", serde_json::to_string(&report)?);
+        outln!("{}", serde_json::to_string(&report)?)?;
     } else {
         for w in &report.warnings {
             eprintln!("horizon: warning: {w}");
         }
-        println!(
+        outln!(
             "{} -> {}: {} submeshes, {} instances, {} expanded triangles, {} bytes",
             input.display(),
             output.display(),
@@ -85,40 +82,7 @@ pub fn convert(input: &Path, output: &Path, compress: bool, json: bool) -> anyho
             report.stats.instances,
             report.stats.triangles_expanded,
             report.output_bytes
-        );
-    }
-    Ok(())
-}
-
-/// Writes `bytes` to `path` through a temporary file in the same folder and a rename.
-pub fn write_atomically(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
-    // The store's writer: temporary file, fsync, rename, fsync of the folder.
-    horizon_aggregate::store::write_atomically(path, bytes)
-        .with_context(|| format!("cannot write {}", path.display()))
-}
-
-/// Prints the symmetric Metro-style Hausdorff distance between two model files, each expanded
-/// into world space.
-pub fn distance(a: &Path, b: &Path, samples: usize, json: bool) -> anyhow::Result<()> {
-    let ma = import_file(a, &ImportOptions::default())?.mesh.expand();
-    let mb = import_file(b, &ImportOptions::default())?.mesh.expand();
-    let options = horizon_simplify::distance::DistanceOptions {
-        samples,
-        ..Default::default()
-    };
-    let report = horizon_simplify::distance::hausdorff(&ma, &mb, &options)?;
-    if json {
-        println!("{}", serde_json::to_string(&report)?);
-    } else {
-        println!(
-            "hausdorff {:.6e} ({:.4e} of the diagonal {:.4}); mean {:.4e} / {:.4e}; {:.3} s",
-            report.hausdorff,
-            report.hausdorff_rel_diag,
-            report.diagonal,
-            report.forward.mean,
-            report.backward.mean,
-            report.seconds
-        );
+        )?;
     }
     Ok(())
 }

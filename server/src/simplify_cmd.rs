@@ -4,10 +4,10 @@ use std::path::Path;
 use std::time::Instant;
 
 use horizon_mesh::{export_glb, import_file, ExportOptions, ImportOptions};
+use horizon_server::outln;
 use horizon_simplify::{simplify, simplify_meshopt, simplify_qem, SimplifyOptions, Target};
+use horizon_world::write_atomically;
 use serde::Serialize;
-
-use crate::mesh_cmd::write_atomically;
 
 /// Which simplifier to run.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -98,9 +98,9 @@ pub fn run(
         eprintln!("horizon: warning: {w}");
     }
     if json {
-        println!("{}", serde_json::to_string(&report)?);
+        outln!("{}", serde_json::to_string(&report)?)?;
     } else {
-        println!(
+        outln!(
             "{} -> {} ({}): {} -> {} expanded triangles (target {}), error {:.3e} ({:.2e} of the diagonal), {:.3} s, {} bytes",
             input.display(),
             output.display(),
@@ -112,7 +112,7 @@ pub fn run(
             report.error_rel_diag,
             report.seconds,
             report.output_bytes
-        );
+        )?;
     }
     Ok(())
 }

@@ -1,9 +1,10 @@
-//! Integration test of `horizon gen world`, `horizon build` and `horizon cut` (issue 5) on the
-//! village world: the written directory, the descriptor cache, the complete-view invariant of
-//! the cut and one-line errors on bad input.
+//! `horizon build` and `horizon cut` on the village world: the descriptor cache, the
+//! complete-view invariant of the cut, one-line errors on bad input, and a closed stdout
+//! ending a command quietly.
 
-use std::path::Path;
-use std::process::{Command, Output};
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
 
 use serde_json::Value;
 
@@ -32,8 +33,8 @@ fn fails_with_one_line(args: &[&str]) {
     assert!(!stderr.contains("panicked"), "{stderr}");
 }
 
-fn cut(dir: &str, angle: &str) -> Value {
-    let stdout = ok(&[
+fn cut_args<'a>(dir: &'a str, angle: &'a str) -> Vec<&'a str> {
+    vec![
         "cut",
         dir,
         "--pos",
@@ -42,29 +43,27 @@ fn cut(dir: &str, angle: &str) -> Value {
         angle,
         "--max-results",
         "100000",
-        "--json",
-        "--explain",
-    ]);
-    serde_json::from_str(&stdout).expect("cut --json prints JSON")
+    ]
+}
+
+fn cut(dir: &str, angle: &str) -> Value {
+    let mut args = cut_args(dir, angle);
+    args.extend(["--json", "--explain"]);
+    serde_json::from_str(&ok(&args)).expect("cut --json prints JSON")
+}
+
+/// The village, seed 3, written by the library the demo and the lab use.
+fn village(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("horizon-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    horizon_server::generated::write_world("village", &dir, 3, &[]).expect("village written");
+    dir
 }
 
 #[test]
-fn village_gen_build_cut_covers_every_object_once() {
-    let tmp = std::env::temp_dir().join(format!("horizon-world-cli-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&tmp);
+fn village_build_and_cut_cover_every_object_once() {
+    let tmp = village("world-cli");
     let dir = tmp.to_str().expect("utf-8 temp path");
-
-    ok(&["gen", "world", "village", dir, "--seed", "3"]);
-    let manifest: Value = serde_json::from_slice(
-        &std::fs::read(Path::new(dir).join("world.json")).expect("world.json"),
-    )
-    .expect("world.json parses");
-    assert_eq!(manifest["object_count"], 10_000);
-    assert_eq!(manifest["model_count"], 6);
-    let models = std::fs::read_dir(Path::new(dir).join("models"))
-        .expect("models/")
-        .count();
-    assert_eq!(models, 6);
 
     // The BVH only: aggregates are checked in release by tests/reference/check_aggregates.py
     // and in horizon-aggregate's own tests; a debug build of 1,227 atlases is minutes.
@@ -102,16 +101,22 @@ fn village_gen_build_cut_covers_every_object_once() {
         len(&fine)
     );
 
-    // Figure 5's sweep: one row per (mu, w), then the obvhs baseline.
-    let rows: Value =
-        serde_json::from_str(&ok(&["sweep", dir, "--views", "3", "--json"])).expect("json");
-    let rows = rows.as_array().expect("rows");
-    let trees = |name: &str| rows.iter().filter(|r| r["tree"] == name).count();
-    assert_eq!(
-        (trees("similarity"), trees("obvhs"), rows.len()),
-        (24, 1, 25)
-    );
-    assert!(rows.iter().all(|r| r["mean_cut_size"].as_f64() > Some(0.0)));
+    // A reader that stops after one line (`horizon cut ... | head -1`): status 0, no panic.
+    let mut child = Command::new(env!("CARGO_BIN_EXE_horizon"))
+        .args(cut_args(dir, "0.0001"))
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("horizon cut starts");
+    let mut first_line = String::new();
+    BufReader::new(child.stdout.take().expect("stdout"))
+        .read_line(&mut first_line)
+        .expect("one line");
+    assert!(first_line.starts_with("cut at "), "{first_line}");
+    let out = child.wait_with_output().expect("horizon cut ends");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(0), "{stderr}");
+    assert!(stderr.is_empty(), "{stderr}");
 
     // Bad input: one line, exit code 1.
     fails_with_one_line(&["cut", dir, "--pos", "1,2", "--min-solid-angle", "0.01"]);
@@ -126,6 +131,37 @@ fn village_gen_build_cut_covers_every_object_once() {
     fails_with_one_line(&["build", "/nonexistent/world"]);
     std::fs::write(Path::new(dir).join("objects.json"), b"{not json").expect("write");
     fails_with_one_line(&["build", dir]);
-    fails_with_one_line(&["gen", "world", "moon", dir]);
     let _ = std::fs::remove_dir_all(&tmp);
+}
+
+#[test]
+fn cut_before_build_says_to_build() {
+    let tmp = village("unbuilt");
+    let dir = tmp.to_str().expect("utf-8 temp path");
+    let out = horizon(&["cut", dir, "--pos", "0,2,0", "--min-solid-angle", "0.01"]);
+    assert_eq!(out.status.code(), Some(1));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("run horizon build"), "{stderr}");
+    let _ = std::fs::remove_dir_all(&tmp);
+}
+
+#[test]
+fn horizon_lists_only_product_commands() {
+    let help = ok(&["--help"]);
+    for product in ["mesh", "simplify", "descriptors", "build", "cut", "demo"] {
+        assert!(help.contains(product), "{product} missing: {help}");
+    }
+    for lab in [
+        "gen",
+        "report",
+        "sweep",
+        "calibrate",
+        "bench-bvh",
+        "bench-aggregates",
+    ] {
+        assert!(
+            !help.lines().any(|l| l.trim_start().starts_with(lab)),
+            "{lab} is a lab command: {help}"
+        );
+    }
 }

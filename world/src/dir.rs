@@ -1,25 +1,24 @@
-//! The world directory (issues 5 and 6, "World directory"): a content-addressed model store
-//! and the files describing a world.
+//! The world directory: its files, their formats, and reading them back checked.
 //!
 //! ```text
 //! DIR/world.json        WorldManifest: format, name, seed, counts, the models (hash, name)
 //! DIR/objects.json      ObjectList: per object its id, model hash and 3x4 transform
-//! DIR/models/<hash>.glb every unique model, named by the FNV-1a 128 hash of its GLB bytes
+//! DIR/models/<hash>.glb every unique model, normalised to GLB, named by its content hash
 //! DIR/descriptors.json  DescriptorCache: per model hash its descriptors and local bounds
 //! DIR/bvh.json          the BVH snapshot (horizon_bvh::Bvh, serde)
+//! DIR/aggregates/       the aggregate store (`aggregates.rs`)
 //! ```
 //!
-//! Every file is written atomically (temporary file, then rename), so a reader never sees a
-//! half-written file.
+//! Every file is written atomically (`durable.rs`), so a reader never sees a half-written one.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashSet};
 use std::path::{Path, PathBuf};
 
-use anyhow::Context;
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
-use crate::mesh_cmd::write_atomically;
+use crate::durable::write_atomically;
+use crate::error::WorldError;
 
 /// Version of the world directory format written by this build.
 pub const FORMAT: u32 = 1;
@@ -29,7 +28,7 @@ pub const FORMAT: u32 = 1;
 pub struct WorldManifest {
     /// [`FORMAT`].
     pub format: u32,
-    /// The world's generator name (village, island, city, city9).
+    /// The world's name (for generated worlds, the generator's: village, island, city, city9).
     pub name: String,
     /// The generator's seed.
     pub seed: u64,
@@ -46,7 +45,7 @@ pub struct WorldManifest {
 pub struct ModelRecord {
     /// The content hash: `models/<hash>.glb`.
     pub hash: String,
-    /// The generator's name for it.
+    /// A name for people (the generator's, or the uploaded file's).
     pub name: String,
     /// Size of the GLB file.
     pub bytes: u64,
@@ -71,7 +70,7 @@ pub struct ObjectRecord {
     pub transform: [f32; 12],
 }
 
-/// `DIR/descriptors.json`: what `horizon build` computed per model, so a rebuild reuses it.
+/// `DIR/descriptors.json`: what ingest computed per model, so a rebuild reuses it.
 #[derive(Debug, Clone, Default, Serialize, Deserialize)]
 pub struct DescriptorCache {
     /// Per model hash.
@@ -91,7 +90,7 @@ pub struct ModelDescriptors {
     pub radius: f32,
 }
 
-/// Paths inside a world directory.
+/// Paths inside a world directory, and its JSON files read and written.
 #[derive(Debug, Clone)]
 pub struct WorldDir {
     root: PathBuf,
@@ -103,6 +102,11 @@ impl WorldDir {
         Self {
             root: root.to_path_buf(),
         }
+    }
+
+    /// The directory itself.
+    pub fn root(&self) -> &Path {
+        &self.root
     }
 
     /// `DIR/world.json`.
@@ -135,58 +139,66 @@ impl WorldDir {
         self.models().join(format!("{hash}.glb"))
     }
 
+    /// `DIR/aggregates`.
+    pub fn aggregates(&self) -> PathBuf {
+        self.root.join("aggregates")
+    }
+
     /// Reads and parses a JSON file, with the path in the error.
-    pub fn read_json<T: DeserializeOwned>(path: &Path) -> anyhow::Result<T> {
-        let bytes =
-            std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
-        serde_json::from_slice(&bytes).with_context(|| format!("corrupt {}", path.display()))
+    pub fn read_json<T: DeserializeOwned>(path: &Path) -> Result<T, WorldError> {
+        let bytes = std::fs::read(path).map_err(|e| WorldError::io(path, e))?;
+        serde_json::from_slice(&bytes).map_err(|e| WorldError::Corrupt {
+            path: path.to_path_buf(),
+            reason: e.to_string(),
+        })
     }
 
     /// Serialises `value` as JSON and writes it atomically.
-    pub fn write_json<T: Serialize>(path: &Path, value: &T) -> anyhow::Result<()> {
-        let bytes = serde_json::to_vec(value)?;
+    pub fn write_json<T: Serialize>(path: &Path, value: &T) -> Result<(), WorldError> {
+        let bytes = serde_json::to_vec(value).map_err(|e| WorldError::Corrupt {
+            path: path.to_path_buf(),
+            reason: e.to_string(),
+        })?;
         write_atomically(path, &bytes)
     }
 
     /// The manifest and the object list, checked against each other.
-    pub fn load(&self) -> anyhow::Result<(WorldManifest, ObjectList)> {
+    pub fn load(&self) -> Result<(WorldManifest, ObjectList), WorldError> {
         if !self.root.is_dir() {
-            anyhow::bail!("{} is not a world directory", self.root.display());
+            return Err(WorldError::NotAWorld(self.root.clone()));
         }
         let manifest: WorldManifest = Self::read_json(&self.manifest())?;
         if manifest.format != FORMAT {
-            anyhow::bail!(
-                "{}: format {} is not supported (expected {FORMAT})",
-                self.manifest().display(),
-                manifest.format
-            );
+            return Err(WorldError::Corrupt {
+                path: self.manifest(),
+                reason: format!(
+                    "format {} is not supported (expected {FORMAT})",
+                    manifest.format
+                ),
+            });
         }
         let objects: ObjectList = Self::read_json(&self.objects())?;
         if objects.objects.len() != manifest.object_count {
-            anyhow::bail!(
+            return Err(WorldError::Inconsistent(format!(
                 "{} holds {} objects but world.json says {}",
                 self.objects().display(),
                 objects.objects.len(),
                 manifest.object_count
-            );
+            )));
         }
-        let known: std::collections::HashSet<&str> =
-            manifest.models.iter().map(|m| m.hash.as_str()).collect();
+        let known: HashSet<&str> = manifest.models.iter().map(|m| m.hash.as_str()).collect();
         for (i, o) in objects.objects.iter().enumerate() {
-            if o.id as usize != i {
-                anyhow::bail!("object {i} has id {}", o.id);
-            }
-            if !known.contains(o.model.as_str()) {
-                anyhow::bail!("object {i} uses unknown model {}", o.model);
-            }
-            if !o.transform.iter().all(|v| v.is_finite()) {
-                anyhow::bail!("object {i} has a non-finite transform");
-            }
+            let problem = if o.id as usize != i {
+                format!("object {i} has id {}", o.id)
+            } else if !known.contains(o.model.as_str()) {
+                format!("object {i} uses unknown model {}", o.model)
+            } else if !o.transform.iter().all(|v| v.is_finite()) {
+                format!("object {i} has a non-finite transform")
+            } else {
+                continue;
+            };
+            return Err(WorldError::Inconsistent(problem));
         }
         Ok((manifest, objects))
     }
 }
-
-/// The content address of a model: FNV-1a 128 as 32 hex digits (shared with the aggregate
-/// store, `horizon_aggregate::store::content_hash`).
-pub use horizon_aggregate::store::content_hash;

@@ -1,5 +1,5 @@
-//! `horizon bench-bvh` (issue 5, "Targets"): measures the similarity-aware BVH on a built
-//! world directory (city9: 540,000 objects) and writes a markdown report.
+//! `horizon-lab bench-bvh`: measures the similarity-aware BVH on a built world directory
+//! (city9: 540,000 objects) against its targets and writes a markdown report.
 //!
 //! The trees are rebuilt from `objects.json` and the `descriptors.json` cache (parsing the
 //! ~1 GB `bvh.json` snapshot of city9 would be slower than the bulk build itself):
@@ -11,10 +11,10 @@
 //! 5. standing-query updates for a viewer walking 1 m per step;
 //! 6. memory per object.
 //!
-//! Every target of the issue is printed with PASS or FAIL beside the measured figure.
+//! Every target is printed with PASS or FAIL beside the measured figure.
 
 use std::fmt::Write as _;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::Context;
@@ -23,11 +23,13 @@ use horizon_bvh::{
     Aabb, Bvh, Cut, CutQuery, CutWorkspace, SpatialBaseline, SpatialCut, SpatialWorkspace,
     StandingOptions, StandingQuery,
 };
-use horizon_worldgen::rng::Rng;
+use horizon_bvh::{DEFAULT_MU, DEFAULT_W};
+use horizon_mesh::rng::Rng;
+use horizon_server::outln;
+use horizon_world::{write_atomically, World};
 use serde::Serialize;
 
-use crate::world_cmd::EYE_HEIGHT;
-use crate::world_store::{DescriptorCache, WorldDir};
+use crate::views::{viewpoints, EYE_HEIGHT};
 
 /// Hysteresis of the standing query (the library's default).
 const HYSTERESIS: f32 = 0.1;
@@ -45,7 +47,7 @@ pub struct BenchArgs {
     pub json: bool,
 }
 
-/// One target of the issue with its measured figure.
+/// One target with its measured figure.
 #[derive(Debug, Serialize)]
 struct Target {
     name: String,
@@ -186,18 +188,16 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
     }
     let dir = &args.dir;
     let load_before = load_average();
-    let progress = |msg: &str| eprintln!("horizon: bench-bvh: {msg}");
+    let progress = |msg: &str| eprintln!("horizon-lab: bench-bvh: {msg}");
 
-    // Load the world and the descriptor cache.
+    // Load the world and its descriptors.
     let t = Instant::now();
-    let store = WorldDir::new(dir);
-    let (manifest, objects) = store.load()?;
-    if !store.descriptors().exists() {
+    let world = World::open(dir)?;
+    if world.descriptors().models.is_empty() {
         anyhow::bail!("{} is not built (run horizon build)", dir.display());
     }
-    let cache: DescriptorCache = WorldDir::read_json(&store.descriptors())?;
-    let input = crate::world_cmd::new_objects(&manifest, &objects, &cache)?;
-    drop(objects);
+    let manifest = world.manifest();
+    let input = world.bvh_input()?;
     let load_seconds = t.elapsed().as_secs_f64();
     let n = input.len();
     if n == 0 {
@@ -214,7 +214,7 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
         .context("cannot start a one-thread pool")?;
 
     // 1. Bulk rebuild, all cores.
-    let options = crate::world_cmd::world_options(0.8, 0.2, &manifest, &cache);
+    let options = world.bvh_options(DEFAULT_MU, DEFAULT_W);
     let t = Instant::now();
     let bulk = Bvh::bulk_build(options.clone(), &input)?;
     let seconds = t.elapsed().as_secs_f64();
@@ -247,7 +247,6 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
     };
     progress(&format!("incremental insertion {seconds:.2} s"));
     drop(input);
-    drop(cache);
 
     let t = Instant::now();
     bulk.validate().context("the bulk tree is invalid")?;
@@ -261,7 +260,7 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
         .node(bulk.root())
         .map(|r| r.aabb())
         .context("the tree has no root")?;
-    let viewpoints = crate::world_cmd::viewpoints(&bounds, args.seed, args.views);
+    let viewpoints = viewpoints(&bounds, args.seed, args.views);
 
     // 3. Cut queries on both trees, one core.
     progress("cut queries");
@@ -390,24 +389,15 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
     let out = args
         .out
         .clone()
-        .unwrap_or_else(|| PathBuf::from("bench/results").join(format!("bvh_{}.md", report.world)));
-    write_report(&out, &markdown)?;
+        .unwrap_or_else(|| PathBuf::from(crate::RESULTS).join(format!("bvh_{}.md", report.world)));
+    write_atomically(&out, markdown.as_bytes())?;
     if args.json {
-        println!("{}", serde_json::to_string(&report)?);
+        outln!("{}", serde_json::to_string(&report)?)?;
     } else {
-        print!("{markdown}");
-        println!("\nwritten to {}", out.display());
+        outln!("{markdown}")?;
+        outln!("written to {}", out.display())?;
     }
     Ok(())
-}
-
-/// Writes `text` to `path`, creating its folder.
-fn write_report(path: &Path, text: &str) -> anyhow::Result<()> {
-    if let Some(parent) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
-        std::fs::create_dir_all(parent)
-            .with_context(|| format!("cannot create {}", parent.display()))?;
-    }
-    crate::mesh_cmd::write_atomically(path, text.as_bytes())
 }
 
 /// `/proc/loadavg`'s three load averages, or "unknown".
@@ -597,10 +587,10 @@ fn fig(v: f64) -> String {
 /// The markdown report.
 fn markdown(r: &BenchReport) -> String {
     let mut s = String::new();
-    let _ = writeln!(s, "# BVH benchmark on `{}` (issue 5 targets)\n", r.world);
+    let _ = writeln!(s, "# BVH benchmark on `{}`\n", r.world);
     let _ = writeln!(
         s,
-        "`horizon bench-bvh {} --views {} --seed {} --steps {}`: {} objects, {} unique models; \
+        "`horizon-lab bench-bvh {} --views {} --seed {} --steps {}`: {} objects, {} unique models; \
          {} rayon threads for the bulk rebuild, one core for everything else. Load average \
          before {}, after {}. Trees rebuilt from objects.json + descriptors.json (load {:.2} s); \
          options mu {}, w {}, descriptor scales (the world's median z_diff and t_diff) {} and \

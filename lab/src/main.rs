@@ -1,0 +1,276 @@
+//! The `horizon-lab` binary: what measures and researches Horizon, kept out of the product.
+//! Workloads (`gen`), reports and benchmarks against peers and baselines (`report`, `sweep`,
+//! `bench-bvh`, `bench-aggregates`, `distance`) and calibration (`calibrate`). Its results
+//! go to `lab/results/`; the scripts that drive peers and third-party tools are in
+//! `lab/bench/`.
+//!
+//! # Layout
+//! - `gen.rs`: `gen model`, `gen world`.
+//! - `report.rs`: `report`, the join download against naive and unoptimised aggregates;
+//!   `measuring.rs`: the store the unoptimised baseline is built into.
+//! - `sweep.rs`: `sweep`, Figure 5.
+//! - `bench_bvh.rs`: `bench-bvh`; `bench_aggregates.rs`: `bench-aggregates`.
+//! - `calibrate.rs`: `calibrate`, Table 1.
+//! - `distance.rs`: `distance`, the Hausdorff yardstick.
+//! - `views.rs`: the seeded viewpoints they share.
+
+mod bench_aggregates;
+mod bench_bvh;
+mod calibrate;
+mod distance;
+mod gen;
+mod measuring;
+mod report;
+mod sweep;
+mod views;
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+use horizon_bvh::{DEFAULT_MAX_RESULTS, DEFAULT_MIN_SOLID_ANGLE};
+
+/// Where results are written by default, relative to the repository's root.
+const RESULTS: &str = "lab/results";
+
+/// Horizon's lab: workloads, benchmarks, reports and calibration.
+#[derive(Debug, Parser)]
+#[command(name = "horizon-lab", version, about)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Seeded procedural workloads.
+    #[command(subcommand)]
+    Gen(GenCommand),
+    /// The join download of a built world: for seeded viewpoints, the unique bytes of every
+    /// asset in the cut, with draw calls and textures, against every model of the world
+    /// (naive) and against unoptimised aggregates (built into DIR/baseline on first use; only their sizes and handoffs are kept).
+    Report {
+        /// The built world directory.
+        dir: PathBuf,
+        /// Number of seeded viewpoints.
+        #[arg(long, default_value_t = 10)]
+        views: usize,
+        /// Seed of the viewpoints.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Smallest solid angle (steradians) shown as itself.
+        #[arg(long, default_value_t = DEFAULT_MIN_SOLID_ANGLE as f32)]
+        min_solid_angle: f32,
+        /// Most entries in a cut.
+        #[arg(long, default_value_t = DEFAULT_MAX_RESULTS)]
+        max_results: usize,
+        /// Print JSON instead of text.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Figure 5: average cut cost (nodes visited, cut size) over seeded viewpoints for trees
+    /// built with mu in {0, 0.2, ..., 1} and w in {0, 0.2, 0.5, 1}, on built worlds.
+    Sweep {
+        /// Built world directories.
+        #[arg(required = true)]
+        dirs: Vec<PathBuf>,
+        /// Viewpoints per tree.
+        #[arg(long, default_value_t = 50)]
+        views: usize,
+        /// Seed of the viewpoints.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Smallest solid angle (steradians) shown as itself.
+        #[arg(long, default_value_t = DEFAULT_MIN_SOLID_ANGLE as f32)]
+        min_solid_angle: f32,
+        /// Most entries per cut.
+        #[arg(long, default_value_t = DEFAULT_MAX_RESULTS)]
+        max_results: usize,
+        /// Print JSON instead of a markdown table.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Measures the BVH's targets on a built world (bulk rebuild, incremental insertion,
+    /// cut queries beside the obvhs baseline, standing-query updates, memory) and writes a
+    /// markdown report with PASS/FAIL per target.
+    BenchBvh {
+        /// The built world directory (`horizon build` wrote its descriptors.json).
+        dir: PathBuf,
+        /// Seeded viewpoints for the cut queries.
+        #[arg(long, default_value_t = 200)]
+        views: usize,
+        /// Seed of the viewpoints and of the walk.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Steps of 1 m of the standing-query walk.
+        #[arg(long, default_value_t = 2000)]
+        steps: usize,
+        /// Smallest solid angle (steradians) shown as itself.
+        #[arg(long, default_value_t = DEFAULT_MIN_SOLID_ANGLE as f32)]
+        min_solid_angle: f32,
+        /// Most entries per cut.
+        #[arg(long, default_value_t = DEFAULT_MAX_RESULTS)]
+        max_results: usize,
+        /// The markdown report (default: lab/results/bvh_<world name>.md).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Print the report as JSON on stdout (the markdown file is still written).
+        #[arg(long)]
+        json: bool,
+    },
+    /// The rebuild's benchmark: a full aggregate build of a built world from scratch
+    /// (time, memory), then seeded inserts and the incremental rebuild (what it touched and
+    /// how long it took). Writes lab/results/aggregates_<world>.md.
+    BenchAggregates {
+        /// The built world directory.
+        dir: PathBuf,
+        /// Objects inserted before the incremental rebuild.
+        #[arg(long, default_value_t = 100)]
+        insert: usize,
+        /// Seed of the inserted objects.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// The markdown report (default: lab/results/aggregates_<world name>.md).
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
+    /// Derives Table 1's deduplication thresholds by the paper's procedure (renders from three
+    /// directions, SSIM, every pair of models and perturbed variants) and writes table1.json
+    /// and table1.md.
+    Calibrate {
+        /// Folder to write table1.json and table1.md into.
+        #[arg(long, default_value = "descriptors/data")]
+        out: PathBuf,
+        /// Folder holding the shared models (assets/models of the repository).
+        #[arg(long, default_value = "assets/models")]
+        assets: PathBuf,
+        /// SSIM at or above which two renders count as indistinguishable.
+        #[arg(long, default_value_t = 0.95)]
+        ssim: f64,
+        /// Seeds per worldgen model (each seed is a similar but distinct model).
+        #[arg(long, default_value_t = 2)]
+        seeds: u64,
+        /// Also write every compared pair (names, z_diff, t_diff, SSIM per size) as JSON.
+        #[arg(long)]
+        pairs: Option<PathBuf>,
+    },
+    /// Symmetric Metro-style Hausdorff distance between two models (vertex, edge and face
+    /// samples; exact point-to-triangle distance).
+    Distance {
+        /// The reference model.
+        a: PathBuf,
+        /// The model compared with it.
+        b: PathBuf,
+        /// Area-uniform face samples per direction (edges get as many; vertices are added).
+        #[arg(long, default_value_t = 100_000)]
+        samples: usize,
+        /// Print JSON instead of text.
+        #[arg(long)]
+        json: bool,
+    },
+}
+
+#[derive(Debug, Subcommand)]
+enum GenCommand {
+    /// Writes a benchmark world (village, island, city or city9) as a world directory.
+    World {
+        /// The world's name.
+        name: String,
+        /// The directory to write (created if missing).
+        dir: PathBuf,
+        /// Seed of the generator: the same seed gives the same world.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Folder of user models for city and city9 (default: the repository's
+        /// assets/models).
+        #[arg(long)]
+        assets: Option<PathBuf>,
+    },
+    /// Writes one of the benchmark models shaped like the IAS paper's Table 2:
+    /// maple-tree, village-mesh, patio-chair or stonehenge.
+    Model {
+        /// The model's name.
+        name: String,
+        /// The .glb file to write.
+        output: PathBuf,
+        /// Seed of the generator: the same seed gives the same model.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Print a JSON report instead of text.
+        #[arg(long)]
+        json: bool,
+    },
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Gen(GenCommand::Model {
+            name,
+            output,
+            seed,
+            json,
+        }) => gen::model(&name, &output, seed, json),
+        Command::Gen(GenCommand::World {
+            name,
+            dir,
+            seed,
+            assets,
+        }) => gen::world(&name, &dir, seed, assets.as_deref()),
+        Command::Report {
+            dir,
+            views,
+            seed,
+            min_solid_angle,
+            max_results,
+            json,
+        } => report::run(&dir, views, seed, min_solid_angle, max_results, json),
+        Command::Sweep {
+            dirs,
+            views,
+            seed,
+            min_solid_angle,
+            max_results,
+            json,
+        } => sweep::run(&dirs, views, seed, min_solid_angle, max_results, json),
+        Command::BenchBvh {
+            dir,
+            views,
+            seed,
+            steps,
+            min_solid_angle,
+            max_results,
+            out,
+            json,
+        } => bench_bvh::run(&bench_bvh::BenchArgs {
+            dir,
+            views,
+            seed,
+            steps,
+            min_solid_angle,
+            max_results,
+            out,
+            json,
+        }),
+        Command::BenchAggregates {
+            dir,
+            insert,
+            seed,
+            out,
+        } => bench_aggregates::run(&dir, insert, seed, out.as_deref()),
+        Command::Calibrate {
+            out,
+            assets,
+            ssim,
+            seeds,
+            pairs,
+        } => calibrate::calibrate(&assets, &out, ssim, seeds, pairs.as_deref()),
+        Command::Distance {
+            a,
+            b,
+            samples,
+            json,
+        } => distance::run(&a, &b, samples, json),
+    };
+    horizon_server::terminal::finish("horizon-lab", result)
+}

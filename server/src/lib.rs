@@ -1,0 +1,12 @@
+//! The `horizon` product (`DESIGN.md`, "Workspace layout"): the command-line tools a user
+//! runs, over `horizon-world`. The binary is `src/main.rs`; this library holds what the lab's
+//! `horizon-lab` shares with it.
+//!
+//! # Layout
+//! - `terminal.rs`: stdout lines a closed pipe ends quietly ([`outln!`]), progress bars,
+//!   one-line errors and exit statuses.
+//! - `generated.rs`: a `horizon-worldgen` world written as a world directory (the demo's
+//!   village, the lab's benchmark worlds).
+
+pub mod generated;
+pub mod terminal;
