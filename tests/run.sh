@@ -2,8 +2,9 @@
 # The project's one test command (README, .ci/run). On a fresh machine it installs what the
 # reference checks need, then runs, in order:
 #   1. cargo fmt --check and cargo clippy -D warnings over the workspace;
-#   2. cargo test over the workspace (unit, integration and property tests);
-#   3. the reference checks in tests/reference against third-party tools: the Khronos
+#   2. the layout invariant: the product (horizon-server) links no lab code and no baseline;
+#   3. cargo test over the workspace (unit, integration and property tests);
+#   4. the reference checks in tests/reference against third-party tools: the Khronos
 #      glTF-Validator (npm gltf-validator), trimesh, and an independent glTF reading in numpy.
 # The Python venv (trimesh, fast-simplification, pymeshlab, point-cloud-utils) and the npm
 # validator are installed once under $HORIZON_TOOLS (default ~/.cache/horizon-tools).
@@ -31,11 +32,24 @@ step "format and lints"
 cargo fmt --all --check
 cargo clippy --workspace --all-targets --quiet -- -D warnings
 
+step "the product links no lab code and no baseline"
+if cargo tree -p horizon-server -e normal --prefix none | grep -q '^horizon-lab '; then
+  echo "horizon-server depends on horizon-lab" >&2
+  exit 1
+fi
+if cargo tree -p horizon-server -e features --prefix none | grep -q 'feature "baseline"'; then
+  echo "horizon-server enables a baseline feature" >&2
+  exit 1
+fi
+
 step "cargo test"
 cargo test --workspace --quiet
 
 step "reference checks (Khronos glTF-Validator, trimesh)"
+# Built one after the other, not together: built together, the lab's baseline features would
+# be unified into the product binary under test.
 cargo build --release --quiet -p horizon-server
+cargo build --release --quiet -p horizon-lab
 GLTF_VALIDATOR_DIR="$tools/npm" "$tools/venv/bin/python" tests/reference/check_models.py \
   target/release/horizon tests/reference/validate.mjs
 GLTF_VALIDATOR_DIR="$tools/npm" "$tools/venv/bin/python" tests/reference/check_simplify.py \

@@ -248,23 +248,31 @@ fn build(
                 );
                 let read_children = read.elapsed().as_secs_f64();
                 let input = node_input(bvh, node, children, &options.aggregate, atlas)?;
-                let outcome = generate_with(&input, models, &table, &options.aggregate, &textures)
-                    .and_then(|mut out| {
-                        let encoding = Instant::now();
-                        let parts = encode_parts(node.0, &out.handoff, models)?;
-                        out.stats.stages.read_children = read_children;
-                        out.stats.stages.parts = encoding.elapsed().as_secs_f64();
-                        let mut stages = out.stats.stages;
-                        let writing = Instant::now();
-                        let entry = store.stage(
-                            key.clone(),
-                            &out.glb,
-                            parts.as_ref().map(|(b, k)| (b.as_slice(), k.clone())),
-                            out.stats,
-                        )?;
-                        stages.write = writing.elapsed().as_secs_f64();
-                        Ok((entry, out.handoff, stages))
-                    });
+                let generated = match options.aggregate.method {
+                    Method::Optimized => {
+                        generate_with(&input, models, &table, &options.aggregate, &textures)
+                    }
+                    #[cfg(feature = "baseline")]
+                    Method::Unoptimized => {
+                        crate::baseline::generate_unoptimized(&input, models, &options.aggregate)
+                    }
+                };
+                let outcome = generated.and_then(|mut out| {
+                    let encoding = Instant::now();
+                    let parts = encode_parts(node.0, &out.handoff, models)?;
+                    out.stats.stages.read_children = read_children;
+                    out.stats.stages.parts = encoding.elapsed().as_secs_f64();
+                    let mut stages = out.stats.stages;
+                    let writing = Instant::now();
+                    let entry = store.stage(
+                        key.clone(),
+                        &out.glb,
+                        parts.as_ref().map(|(b, k)| (b.as_slice(), k.clone())),
+                        out.stats,
+                    )?;
+                    stages.write = writing.elapsed().as_secs_f64();
+                    Ok((entry, out.handoff, stages))
+                });
                 done.fetch_add(1, Ordering::Relaxed);
                 progress(Progress {
                     done: done.load(Ordering::Relaxed),

@@ -28,7 +28,7 @@ use serde::{Deserialize, Serialize};
 use crate::budget::{dedup_distance, Display};
 use crate::dedup::{plan, ModelUse};
 use crate::error::AggregateError;
-use crate::options::{AggregateOptions, Method};
+use crate::options::AggregateOptions;
 use crate::source::{ModelSource, SourceModel};
 
 /// A model submesh: (model number, submesh index in the model).
@@ -234,7 +234,8 @@ pub struct NodeOutput {
     pub stats: NodeStats,
 }
 
-/// Builds one node's aggregate.
+/// Builds one node's aggregate by the optimised pipeline (the rebuild runs the unoptimised
+/// baseline instead where `options.method` asks for it).
 pub fn generate(
     input: &NodeInput,
     models: &dyn ModelSource,
@@ -247,20 +248,6 @@ pub fn generate(
 /// [`generate`], decoding the textures it atlases through `textures`, which the aggregates
 /// of one build share (the same bytes come out either way).
 pub fn generate_with(
-    input: &NodeInput,
-    models: &dyn ModelSource,
-    table: &Table1,
-    options: &AggregateOptions,
-    textures: &TextureCache,
-) -> Result<NodeOutput, AggregateError> {
-    match options.method {
-        Method::Optimized => generate_optimized(input, models, table, options, textures),
-        #[cfg(feature = "baseline")]
-        Method::Unoptimized => crate::baseline::generate_unoptimized(input, models, options),
-    }
-}
-
-fn generate_optimized(
     input: &NodeInput,
     models: &dyn ModelSource,
     table: &Table1,
