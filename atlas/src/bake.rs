@@ -2,7 +2,7 @@
 //! base colour factor, and its gutter filled by extending the edge texels.
 //!
 //! Colour follows glTF 2.0 (section 3.9.2): the base colour texture is sRGB-encoded and the
-//! factor is linear, so texels are decoded to linear light (exact 256-entry table), filtered and
+//! factor is linear, so texels are decoded to linear light (`color.rs`), filtered and
 //! multiplied there, and encoded back to sRGB with rounding. Alpha is linear throughout. An
 //! atlas texel centre at `(i + 0.5, j + 0.5)` inside its rectangle maps to the chart point
 //! `min + (i + 0.5, j + 0.5) * (box size / rect size)`, the inverse of the UV remapping; at scale
@@ -13,80 +13,22 @@
 //! detail is log2 of the larger of the two steps (source texels per atlas texel), and the two
 //! mip levels around it (`cache.rs`, built in linear light) are each sampled bilinearly and
 //! blended. Every shrink factor is thus filtered over its whole footprint at a cost of two
-//! bilinear samples per texel; a box of up to 3 x 3 bilinear samples, the earlier filter, cost
-//! up to nine and aliased beyond a third of full size, where the upper aggregates live.
-
-use std::sync::{Arc, OnceLock};
+//! bilinear samples per texel, where a fixed box of bilinear samples costs more and aliases
+//! once the shrink outgrows the box.
 
 use glam::{DVec2, Vec4};
-use horizon_mesh::model::{AlphaMode, InstancedMesh, Wrap};
+use horizon_mesh::model::{AlphaMode, Wrap};
 use image::{Rgba, RgbaImage};
 use rayon::prelude::*;
 
-use crate::cache::{DecodedTexture, TextureCache};
 use crate::chart::Chart;
-use crate::pack::{Layout, PackedRect};
-use crate::AtlasError;
+use crate::color::{linear_to_srgb8, texel_linear};
+use crate::layout::{Layout, PackedRect};
+use crate::source::Source;
 
 /// Texel coordinates are clamped to +-2^52 before conversion to integers: beyond that an f64
 /// has no fractional texels left, and the sum `x0 + 1` stays far from i64 overflow.
 const FAR_TEXEL: f64 = 4_503_599_627_370_496.0;
-
-/// A decoded texture with the wrap modes it is sampled with.
-#[derive(Clone, Debug)]
-pub(crate) struct Source {
-    /// RGBA8, sRGB colour and linear alpha, with its mip chain (shared through the
-    /// [`TextureCache`]).
-    pub texture: Arc<DecodedTexture>,
-    /// Wrap modes along U and V.
-    pub wrap: [Wrap; 2],
-}
-
-impl Source {
-    /// Level 0: the image itself.
-    pub fn image(&self) -> &RgbaImage {
-        &self.texture.image
-    }
-}
-
-/// Decodes every texture referenced by a material that some submesh uses; the others stay
-/// `None`. A texture that decodes to no pixels also stays `None` and its materials fall back to
-/// flat patches.
-pub(crate) fn decode_sources(
-    mesh: &InstancedMesh,
-    cache: &TextureCache,
-) -> Result<Vec<Option<Source>>, AtlasError> {
-    let mut used = vec![false; mesh.textures.len()];
-    for sub in &mesh.submeshes {
-        let tref = sub
-            .material
-            .and_then(|m| mesh.materials.get(m))
-            .and_then(|m| m.base_color_texture);
-        if let Some(t) = tref {
-            used[t.texture] = true;
-        }
-    }
-    // In parallel: an upper aggregate decodes thousands of textures, and the top of the tree
-    // has too few aggregates to keep the cores busy by itself.
-    mesh.textures
-        .par_iter()
-        .zip(used)
-        .enumerate()
-        .map(|(texture, (tex, used))| {
-            if !used {
-                return Ok(None);
-            }
-            let decoded = cache
-                .decode(tex)
-                .map_err(|source| AtlasError::Decode { texture, source })?;
-            let nonempty = decoded.image.width() > 0 && decoded.image.height() > 0;
-            Ok(nonempty.then_some(Source {
-                texture: decoded,
-                wrap: [tex.wrap_u, tex.wrap_v],
-            }))
-        })
-        .collect()
-}
 
 /// Bakes every chart into an atlas of the layout's size. Texels outside every padded rectangle
 /// stay transparent black. When `opaque`, every alpha is 255.
@@ -306,15 +248,6 @@ fn sample_bilinear(image: &RgbaImage, wrap: [Wrap; 2], p: DVec2) -> Vec4 {
     top * (1.0 - t.y) + bottom * t.y
 }
 
-/// The mean colour of a texture in linear light, for a textured material drawn without UVs.
-pub(crate) fn mean_linear(src: &Source) -> Vec4 {
-    let n = (src.image().width() as f64 * src.image().height() as f64).max(1.0);
-    let sum = src.image().pixels().fold(glam::DVec4::ZERO, |acc, px| {
-        acc + texel_linear(px).as_dvec4()
-    });
-    (sum / n).as_vec4()
-}
-
 /// `x.floor()` without the libm call that baseline x86-64 (no SSE4.1 `roundsd`) makes of it:
 /// the bake's inner loop calls it twice per bilinear sample. Exact for every finite `x`.
 #[inline]
@@ -354,88 +287,6 @@ fn wrap_index(i: i64, n: u32, wrap: Wrap) -> u32 {
     folded as u32
 }
 
-/// One texel as linear RGB and alpha.
-pub(crate) fn texel_linear(px: &Rgba<u8>) -> Vec4 {
-    let lut = srgb_to_linear_table();
-    Vec4::new(
-        lut[px[0] as usize],
-        lut[px[1] as usize],
-        lut[px[2] as usize],
-        alpha_table()[px[3] as usize],
-    )
-}
-
-/// 8-bit alpha to [0, 1] (`a / 255`, looked up rather than divided in the bake's inner loop).
-fn alpha_table() -> &'static [f32; 256] {
-    static TABLE: OnceLock<[f32; 256]> = OnceLock::new();
-    TABLE.get_or_init(|| std::array::from_fn(|a| a as f32 / 255.0))
-}
-
-/// sRGB 8-bit code to linear light (IEC 61966-2-1).
-fn srgb_to_linear_table() -> &'static [f32; 256] {
-    static TABLE: OnceLock<[f32; 256]> = OnceLock::new();
-    TABLE.get_or_init(|| {
-        std::array::from_fn(|v| {
-            let c = v as f64 / 255.0;
-            let l = if c <= 0.04045 {
-                c / 12.92
-            } else {
-                ((c + 0.055) / 1.055).powf(2.4)
-            };
-            l as f32
-        })
-    })
-}
-
-/// Linear light to the nearest sRGB 8-bit code.
-pub(crate) fn linear_to_srgb8(x: f32) -> u8 {
-    // The code whose sRGB value rounds to x: the number of decision points at or below x,
-    // where the decision point between codes v and v + 1 is the linear value of sRGB
-    // (v + 0.5) / 255. A table over 4,096 equal steps of [0, 1] gives that count at the step's
-    // lower end; the few decision points inside the step are then counted one by one.
-    let thresholds = srgb_thresholds();
-    let start = srgb_code_floor_table();
-    // NaN and negatives go to step 0 (as `usize` saturates), beyond 1 to the last.
-    let step = ((x * SRGB_STEPS as f32) as usize).min(SRGB_STEPS - 1);
-    let mut code = usize::from(start[step]);
-    while code < thresholds.len() && thresholds[code] <= x {
-        code += 1;
-    }
-    code as u8
-}
-
-/// Steps of [`srgb_code_floor_table`].
-const SRGB_STEPS: usize = 4096;
-
-/// For step `s`, the count of decision points at or below `s / SRGB_STEPS`, a lower bound of
-/// the code of every value in the step.
-fn srgb_code_floor_table() -> &'static [u8; SRGB_STEPS] {
-    static TABLE: OnceLock<[u8; SRGB_STEPS]> = OnceLock::new();
-    TABLE.get_or_init(|| {
-        let thresholds = srgb_thresholds();
-        std::array::from_fn(|s| {
-            let low = s as f32 / SRGB_STEPS as f32;
-            thresholds.partition_point(|&t| t <= low) as u8
-        })
-    })
-}
-
-/// Linear values at which the 8-bit sRGB code steps up (255 of them).
-fn srgb_thresholds() -> &'static [f32; 255] {
-    static TABLE: OnceLock<[f32; 255]> = OnceLock::new();
-    TABLE.get_or_init(|| {
-        std::array::from_fn(|v| {
-            let c = (v as f64 + 0.5) / 255.0;
-            let l = if c <= 0.04045 {
-                c / 12.92
-            } else {
-                ((c + 0.055) / 1.055).powf(2.4)
-            };
-            l as f32
-        })
-    })
-}
-
 #[cfg(test)]
 mod floor_tests {
     #[test]
@@ -467,16 +318,10 @@ mod floor_tests {
 
 #[cfg(test)]
 mod tests {
-    use super::*;
+    use std::sync::Arc;
 
-    #[test]
-    fn srgb_round_trip_is_exact() {
-        // Decoding then encoding must return every 8-bit code, or scale-1 charts would drift.
-        let lut = srgb_to_linear_table();
-        for v in 0..=255u8 {
-            assert_eq!(linear_to_srgb8(lut[v as usize]), v);
-        }
-    }
+    use super::*;
+    use crate::cache::DecodedTexture;
 
     #[test]
     fn wrap_modes_fold_indices() {
@@ -507,8 +352,8 @@ mod tests {
         );
     }
 
-    /// The bake before its taps were shared: every sample through [`sample_bilinear`], on
-    /// the levels [`lod_levels`] picks, each point mapped into the level the way the taps are.
+    /// The bake without shared taps: every sample through [`sample_bilinear`], on the levels
+    /// [`lod_levels`] picks, each point mapped into the level the way the taps are.
     fn bake_reference(chart: &Chart, rect: &PackedRect, src: &Source) -> Vec<Rgba<u8>> {
         let step =
             (chart.max - chart.min) / DVec2::new(f64::from(rect.width), f64::from(rect.height));
@@ -561,8 +406,8 @@ mod tests {
     #[test]
     fn a_shrunk_checkerboard_bakes_to_its_mean_not_to_one_of_its_colours() {
         // One-texel black and white squares shrunk 2, 5, 8 and 16 times: every texel is the
-        // mean, mid grey (sRGB 188 is linear 0.5), within a few codes. The earlier 3 x 3 box
-        // of bilinear samples baked the 5x board as a coarser checkerboard of 159 and 211.
+        // mean, mid grey (sRGB 188 is linear 0.5), within a few codes, not a coarser
+        // checkerboard of aliased samples.
         for shrink in [2u32, 5, 8, 16] {
             let side = 16 * shrink;
             let board = RgbaImage::from_fn(side, side, |x, y| {
@@ -601,35 +446,6 @@ mod tests {
         assert_eq!(lod_levels(DVec2::splat(f64::NAN), 4), (0, 0, 0.0));
     }
 
-    #[test]
-    fn every_mip_level_halves_and_keeps_the_mean() {
-        let mut state = 7u64;
-        let image = RgbaImage::from_fn(13, 6, |_, _| {
-            state = state
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            let b = (state >> 24).to_le_bytes();
-            Rgba([b[0], b[1], b[2], 255])
-        });
-        let chain = crate::cache::mip_chain(&image);
-        let sides: Vec<(u32, u32)> = chain.iter().map(RgbaImage::dimensions).collect();
-        assert_eq!(sides, vec![(7, 3), (4, 2), (2, 1), (1, 1)]);
-        // The level count comes from the size alone, without building the chain.
-        assert_eq!(DecodedTexture::new(image.clone()).levels(), 1 + chain.len());
-        for (w, h, levels) in [(1, 1, 1), (1, 9, 5), (64, 64, 7), (65, 2, 8)] {
-            assert_eq!(DecodedTexture::new(RgbaImage::new(w, h)).levels(), levels);
-        }
-        // A level of even sides keeps its mean in linear light (up to 8-bit rounding).
-        let mean = |im: &RgbaImage| {
-            let n = f64::from(im.width() * im.height());
-            im.pixels()
-                .fold(glam::DVec4::ZERO, |a, p| a + texel_linear(p).as_dvec4())
-                / n
-        };
-        let (a, b) = (mean(&chain[1]), mean(&chain[2]));
-        assert!((a - b).abs().max_element() < 0.01, "{a} {b}");
-    }
-
     proptest::proptest! {
         #[test]
         fn shared_taps_bake_what_every_sample_alone_bakes(
@@ -666,24 +482,6 @@ mod tests {
             let rect = PackedRect { x: 0, y: 0, width: rect.0, height: rect.1 };
             let fast = bake_interior(&chart, &rect, &[Some(src.clone())], false);
             proptest::prop_assert_eq!(fast, bake_reference(&chart, &rect, &src));
-        }
-    }
-
-    #[test]
-    fn the_srgb_table_encodes_as_the_search_does() {
-        // Every decision point and its neighbours one ulp away, a dense sweep, and the edges.
-        let search = |x: f32| srgb_thresholds().partition_point(|&t| t <= x) as u8;
-        let mut xs = vec![f32::NAN, -1.0, -0.0, 0.0, 1.0, 1.5, f32::INFINITY, f32::MAX];
-        for &t in srgb_thresholds() {
-            xs.extend([
-                t,
-                f32::from_bits(t.to_bits() - 1),
-                f32::from_bits(t.to_bits() + 1),
-            ]);
-        }
-        xs.extend((0..=200_000).map(|k| k as f32 / 200_000.0));
-        for x in xs {
-            assert_eq!(linear_to_srgb8(x), search(x), "{x}");
         }
     }
 }

@@ -1,9 +1,9 @@
 //! Decoded source textures shared between atlases.
 //!
 //! A world's aggregates draw the same few textures again and again: every aggregate above an
-//! object atlases that object's textures, and on the city, decoding them was a third of the
-//! aggregate build. The cache keeps decoded images by their encoded bytes, up to a byte
-//! budget, so each decodes once per build. A hit compares the bytes themselves, so two
+//! object atlases that object's textures, and decoding them anew for each atlas would repeat
+//! the same work many times over. The cache keeps decoded images by their encoded bytes, up to
+//! a byte budget, so each decodes once per build. A hit compares the bytes themselves, so two
 //! textures share an image only when they are the same file. Each image's mip chain (the bake
 //! samples shrunk charts from it) is built on first use and kept with it.
 
@@ -15,7 +15,7 @@ use std::sync::{Arc, Mutex, OnceLock};
 use horizon_mesh::model::Texture;
 use image::{Rgba, RgbaImage};
 
-use crate::bake::{linear_to_srgb8, texel_linear};
+use crate::color::{linear_to_srgb8, texel_linear};
 
 /// A decoded texture and, once asked for, its mip chain.
 #[derive(Debug)]
@@ -61,7 +61,7 @@ impl DecodedTexture {
 /// texels above it, so texel `i` of level `k` covers texels `i 2^k .. (i + 1) 2^k` of the
 /// image; past an odd side the edge texel is repeated (clamp to edge). The bake samples these
 /// so that a chart shrunk by any factor is filtered rather than aliased (`bake.rs`).
-pub(crate) fn mip_chain(image: &RgbaImage) -> Vec<RgbaImage> {
+fn mip_chain(image: &RgbaImage) -> Vec<RgbaImage> {
     let mut out: Vec<RgbaImage> = Vec::new();
     loop {
         let above = out.last().unwrap_or(image);
@@ -211,4 +211,38 @@ fn hash_of(bytes: &[u8]) -> u64 {
     let mut h = DefaultHasher::new();
     bytes.hash(&mut h);
     h.finish()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_mip_level_halves_and_keeps_the_mean() {
+        let mut state = 7u64;
+        let image = RgbaImage::from_fn(13, 6, |_, _| {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            let b = (state >> 24).to_le_bytes();
+            Rgba([b[0], b[1], b[2], 255])
+        });
+        let chain = mip_chain(&image);
+        let sides: Vec<(u32, u32)> = chain.iter().map(RgbaImage::dimensions).collect();
+        assert_eq!(sides, vec![(7, 3), (4, 2), (2, 1), (1, 1)]);
+        // The level count comes from the size alone, without building the chain.
+        assert_eq!(DecodedTexture::new(image.clone()).levels(), 1 + chain.len());
+        for (w, h, levels) in [(1, 1, 1), (1, 9, 5), (64, 64, 7), (65, 2, 8)] {
+            assert_eq!(DecodedTexture::new(RgbaImage::new(w, h)).levels(), levels);
+        }
+        // A level of even sides keeps its mean in linear light (up to 8-bit rounding).
+        let mean = |im: &RgbaImage| {
+            let n = f64::from(im.width() * im.height());
+            im.pixels()
+                .fold(glam::DVec4::ZERO, |a, p| a + texel_linear(p).as_dvec4())
+                / n
+        };
+        let (a, b) = (mean(&chain[1]), mean(&chain[2]));
+        assert!((a - b).abs().max_element() < 0.01, "{a} {b}");
+    }
 }

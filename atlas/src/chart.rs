@@ -14,8 +14,10 @@ use std::collections::HashMap;
 use glam::{DVec2, Vec2, Vec4};
 use horizon_mesh::model::{AlphaMode, InstancedMesh, Material};
 
-use crate::bake::{mean_linear, Source};
-use crate::{material_of, AtlasOptions, MAX_TILES_PER_AXIS};
+use crate::color::mean_linear;
+use crate::material::material_of;
+use crate::options::{AtlasOptions, MAX_TILES_PER_AXIS};
+use crate::source::Source;
 
 /// One rectangle's worth of atlas content.
 #[derive(Clone, Debug, PartialEq)]
@@ -108,7 +110,7 @@ pub(crate) fn chart_mesh(
             }
             _ => {
                 let chart = *patches.entry(sub.material).or_insert_with(|| {
-                    let mean = textured.map_or(Vec4::ONE, |(_, s)| mean_linear(s));
+                    let mean = textured.map_or(Vec4::ONE, |(_, s)| mean_linear(s.image()));
                     out.charts
                         .push(patch(sub.material, material, mean, options.patch_side));
                     out.charts.len() - 1

@@ -2,18 +2,18 @@
 //!
 //! An opaque atlas is a lossless PNG when that is no larger than a JPEG at the top quality and
 //! fits (flat patches and small atlases stay exact), else a JPEG at the highest quality of
-//! [`JPEG_QUALITIES`] that fits; an atlas whose alpha matters stays PNG. When nothing fits, the caller re-packs at
-//! [`next_side`].
+//! [`JPEG_QUALITIES`] that fits; an atlas whose alpha matters stays PNG. When nothing fits,
+//! the caller re-packs at [`next_side`].
 
 use image::codecs::jpeg::JpegEncoder;
 use image::codecs::png::{CompressionType, FilterType, PngEncoder};
 use image::{ExtendedColorType, ImageEncoder, RgbaImage};
 
-use crate::pack::Layout;
-use crate::AtlasError;
+use crate::error::AtlasError;
+use crate::layout::Layout;
 
-/// JPEG qualities tried, best first. The top is 80, not 90: every atlas is downloaded, and on
-/// the city 90 made atlases most of the join download for detail nobody sees on an aggregate.
+/// JPEG qualities tried, best first. The top is 80, not 90: every atlas is downloaded, and 90
+/// costs markedly more bytes per atlas for detail nobody sees on an aggregate seen from afar.
 /// Below 30 blocking shows on every texture; the side shrinks instead.
 const JPEG_QUALITIES: [u8; 5] = [80, 70, 60, 45, 30];
 
@@ -107,8 +107,8 @@ pub(crate) fn next_side(layout: &Layout, bytes: usize, max_bytes: usize) -> Opti
 }
 
 /// PNG, RGB when opaque (a quarter smaller) and RGBA otherwise. Fast deflate: the best
-/// setting took half of a whole aggregate build for a few percent of bytes, and an opaque
-/// atlas that misses the budget falls through to JPEG anyway.
+/// setting costs about as much time as the rest of an aggregate build for a few percent of
+/// bytes, and an opaque atlas that misses the budget falls through to JPEG anyway.
 fn encode_png(image: &RgbaImage, opaque: bool) -> Result<Vec<u8>, AtlasError> {
     let mut out = Vec::new();
     let encoder =
@@ -130,11 +130,11 @@ fn encode_png(image: &RgbaImage, opaque: bool) -> Result<Vec<u8>, AtlasError> {
 
 /// Baseline JPEG of RGB bytes: `image`'s encoder, 4:4:4 with the standard Huffman tables.
 ///
-/// Optimised Huffman tables (the `jpeg-encoder` crate, 0.7.1) measured 6.3% smaller on a
-/// sample of 358 of the city's atlases at identical pixels in libjpeg and `jpeg-decoder`, but
-/// zune-jpeg 0.5.15 (`image`'s decoder, so most Rust engines') decoded 59 of them wrongly;
-/// 4:2:0 chroma was 15% smaller but halves the colour resolution of charts a few texels wide
-/// (36 dB PSNR against the decoded 4:4:4 atlases). Neither is used.
+/// Neither optimised Huffman tables nor 4:2:0 chroma is used. Optimised tables (the
+/// `jpeg-encoder` crate, 0.7.1) make atlases a few percent smaller at identical pixels in
+/// libjpeg and `jpeg-decoder`, but zune-jpeg 0.5.15 (`image`'s decoder, so most Rust engines')
+/// decodes some of them wrongly. 4:2:0 chroma is smaller still but halves the colour
+/// resolution of charts a few texels wide.
 fn encode_jpeg(rgb: &[u8], width: u32, height: u32, quality: u8) -> Result<Vec<u8>, AtlasError> {
     let mut out = Vec::new();
     JpegEncoder::new_with_quality(&mut out, quality)

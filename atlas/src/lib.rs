@@ -8,17 +8,27 @@
 //!
 //! # Layout
 //!
-//! - `lib.rs`: options, report, errors and the [`build_atlas`] pipeline.
+//! - `lib.rs`: the [`build_atlas`] pipeline, its report, and the public re-exports.
+//! - `options.rs`: [`AtlasOptions`] (`max_bytes`, `max_side`, `gutter`, `patch_side`,
+//!   `lossless`) and [`MAX_TILES_PER_AXIS`].
+//! - `error.rs`: [`AtlasError`].
+//! - `material.rs`: the material a submesh draws with, and the one merged output material.
+//! - `source.rs`: the source textures a build reads, decoded once each, with their wrap modes.
+//! - `cache.rs`: [`TextureCache`], decoded textures shared between atlases, each
+//!   ([`DecodedTexture`]) with its mip chain, built in linear light on first use.
+//! - `color.rs`: sRGB to linear light and back, texel reads, the mean colour of an image.
 //! - `chart.rs`: stage 1. UV islands (triangles connected through shared vertex indices) of
 //!   each textured submesh, mapped through KHR_texture_transform into the source's texel space;
 //!   each island's chart is its bounding box widened to whole texels; overlapping charts of one
 //!   material merge. Untextured materials (and submeshes without UVs) share one flat patch per
 //!   material.
-//! - `pack.rs`: stage 2. [`Layout`] (rectangles plus gutters, with [`Layout::validate`]) and the
-//!   search for the largest global texel scale <= 1 at which the charts fit; placement is the
-//!   `crunch` packer's.
-//! - `bake.rs`: stage 3. Decoding, wrap-aware bilinear sampling in linear light, base colour
-//!   factors, alpha modes, gutters.
+//! - `layout.rs`: [`Layout`] (rectangles plus gutters) and its invariants, checked by
+//!   [`Layout::validate`].
+//! - `pack.rs`: stage 2. The search for the largest global texel scale <= 1 at which the charts
+//!   fit, and [`pack_rects`]; placement is the `crunch` packer's (maximal rectangles) up to
+//!   [`MAXRECTS_MAX_CHARTS`] charts and the `guillotiere` allocator's beyond.
+//! - `bake.rs`: stage 3. Wrap-aware bilinear and trilinear sampling in linear light, base
+//!   colour factors, alpha modes, gutters.
 //! - `remap.rs`: stage 4. The new UVs.
 //! - `encode.rs`: stage 5. PNG or JPEG under the byte budget.
 //!
@@ -34,9 +44,9 @@
 //!   whole tiles. A chart spans at most [`MAX_TILES_PER_AXIS`] source widths of texels per axis;
 //!   a chart that tiles further keeps that many texels and is sampled at lower density.
 //! - **Scale.** One global texel scale for every chart (textured and patch): the largest <= 1
-//!   at which the crunch packer places all padded rectangles in `max_side` squared, found by
-//!   shrinking 10% at a time from the area bound and then bisecting the last step. The packer
-//!   spreads rectangles over the square it is given, so the square is then tightened from the
+//!   at which the packer places all padded rectangles in `max_side` squared, found by
+//!   shrinking 10% at a time from the area bound and then bisecting the last step. The packers
+//!   spread rectangles over the square they are given, so the square is then tightened from the
 //!   area bound up in 5% steps. Below scale 1, each atlas texel is a trilinear sample of the
 //!   source's mip chain (built in linear light), so that downscaled detail of any frequency
 //!   is averaged rather than aliased.
@@ -49,9 +59,10 @@
 //! - **Budget.** The atlas is cropped to the packed extent. An opaque atlas is a (fast) PNG
 //!   when that fits `max_bytes` and is no larger than a quality-80 JPEG (flat patches and small
 //!   atlases stay exact), otherwise the JPEG at the highest quality of a fixed ladder that fits;
-//!   with `lossless`, a PNG that fits is always kept. An atlas whose alpha matters stays PNG. When nothing fits, the side shrinks by the square root of the overshoot (bytes
-//!   grow with the texel count) and the charts are re-packed and re-baked, never resampled from
-//!   the baked atlas, so gutters stay intact.
+//!   with `lossless`, a PNG that fits is always kept. An atlas whose alpha matters stays PNG.
+//!   When nothing fits, the side shrinks by the square root of the overshoot (bytes grow with
+//!   the texel count) and the charts are re-packed and re-baked, never resampled from the
+//!   baked atlas, so gutters stay intact.
 //!
 //! # Limits
 //!
@@ -63,29 +74,32 @@
 //!   the other. A shrunk chart's border texels also average source texels just outside its
 //!   box (at most the footprint of one atlas texel).
 //! - Gutters guard bilinear filtering and the first mip levels only; deep mips and JPEG's 8x8
-//!   blocks (and chroma subsampling) can still mix neighbouring charts slightly.
-//! - crunch's packing time grows about quadratically with the chart count (one to two seconds
-//!   per packing of 3,000 charts), and a build packs a dozen or so times; an aggregate with
-//!   thousands of islands would want islands grouped into fewer charts first.
+//!   blocks can still mix neighbouring charts slightly.
+//! - Maximal rectangles' packing time grows about quadratically with the chart count, and a
+//!   build packs a dozen or so times, so past [`MAXRECTS_MAX_CHARTS`] charts the guillotine
+//!   allocator packs instead: fast, but just past that count it fills a few percent less of
+//!   the square, so the texel scale comes out a little lower.
 
 mod bake;
 mod cache;
 mod chart;
+mod color;
 mod encode;
+mod error;
+mod layout;
+mod material;
+mod options;
 mod pack;
 mod remap;
+mod source;
 
-use glam::Vec4;
-use horizon_mesh::model::{
-    AlphaMode, InstancedMesh, InvalidMesh, Material, Submesh, Texture, TextureRef, Wrap,
-};
+use horizon_mesh::model::{AlphaMode, InstancedMesh, Material, Submesh, Texture, Wrap};
 
 pub use cache::{DecodedTexture, TextureCache};
-pub use pack::{pack_rects, Layout, LayoutError, PackedRect, MAXRECTS_MAX_CHARTS};
-
-/// Most source widths (or heights) of texels a chart keeps along one axis; a chart tiling more
-/// often than this is sampled at a lower density instead of filling the atlas with repeats.
-pub const MAX_TILES_PER_AXIS: f64 = 4.0;
+pub use error::AtlasError;
+pub use layout::{Layout, LayoutError, PackedRect};
+pub use options::{AtlasOptions, MAX_TILES_PER_AXIS};
+pub use pack::{pack_rects, MAXRECTS_MAX_CHARTS};
 
 /// Builds the atlased copy of `mesh`: the same submeshes (positions, normals, colours, indices,
 /// order) and instances, with new UVs, one material and one texture of at most
@@ -107,11 +121,11 @@ pub fn build_atlas_with(
     // Refuse broken input before touching any pixel.
     mesh.validate()?;
     // Decode every texture a used material references, once.
-    let sources = bake::decode_sources(mesh, cache)?;
+    let sources = source::decode_sources(mesh, cache)?;
     // Stage 1: chart the used texture regions and the flat-colour patches.
     let charting = chart::chart_mesh(mesh, &sources, options);
     // The one output material decides whether alpha must survive encoding.
-    let material = merge_materials(mesh);
+    let material = material::merge_materials(mesh);
     let opaque = material.alpha_mode == AlphaMode::Opaque;
     // Stages 2, 3 and 5: pack at the largest scale, bake, encode; shrink the side until the
     // encoded atlas fits the budget.
@@ -160,35 +174,6 @@ pub fn build_atlas_with(
     Ok((out, report))
 }
 
-/// Knobs of [`build_atlas`].
-#[derive(Clone, Debug, PartialEq)]
-pub struct AtlasOptions {
-    /// Budget for the encoded texture in bytes; the paper's limit is 128 KB per aggregate.
-    pub max_bytes: usize,
-    /// Largest atlas side in pixels. The caller lowers it for aggregates that are small on
-    /// screen.
-    pub max_side: u32,
-    /// Texels of padding around each chart, filled with the chart's edge texels.
-    pub gutter: u32,
-    /// Side in texels (at scale 1) of the flat colour patch of an untextured material.
-    pub patch_side: u32,
-    /// Keep a lossless PNG whenever it fits the budget, even when a JPEG would be smaller
-    /// (exact texels). Default false: the smaller encoding, since every byte is downloaded.
-    pub lossless: bool,
-}
-
-impl Default for AtlasOptions {
-    fn default() -> Self {
-        Self {
-            max_bytes: 128 * 1024,
-            max_side: 1024,
-            gutter: 2,
-            patch_side: 4,
-            lossless: false,
-        }
-    }
-}
-
 /// What [`build_atlas`] did.
 #[derive(Clone, Debug, PartialEq)]
 pub struct AtlasReport {
@@ -208,93 +193,6 @@ pub struct AtlasReport {
     pub mime_type: String,
     /// The JPEG quality used, for a JPEG atlas.
     pub jpeg_quality: Option<u8>,
-}
-
-/// Why no atlas could be built.
-#[derive(Debug, thiserror::Error)]
-pub enum AtlasError {
-    /// The input mesh breaks one of its invariants.
-    #[error("invalid input mesh: {0}")]
-    InvalidMesh(#[from] InvalidMesh),
-    /// A referenced texture could not be decoded.
-    #[error("texture {texture} does not decode: {source}")]
-    Decode {
-        /// Index of the texture in the input mesh.
-        texture: usize,
-        /// The decoder's complaint.
-        source: image::ImageError,
-    },
-    /// Even one texel per chart does not pack into the allowed side.
-    #[error("{charts} charts do not fit a {side}x{side} atlas even at one texel each")]
-    DoesNotFit {
-        /// Number of charts.
-        charts: usize,
-        /// The side tried.
-        side: u32,
-    },
-    /// The packer produced an invalid layout (a bug, reported rather than drawn).
-    #[error("packed layout is invalid: {0}")]
-    Layout(#[from] LayoutError),
-    /// No side and quality bring the encoded atlas under the budget.
-    #[error("the atlas cannot be encoded in {max_bytes} bytes")]
-    OverBudget {
-        /// The budget.
-        max_bytes: usize,
-    },
-    /// The image encoder failed.
-    #[error("atlas encoding failed: {0}")]
-    Encode(image::ImageError),
-}
-
-/// The material of a submesh, with `None` meaning the glTF default material.
-fn material_of<'a>(mesh: &'a InstancedMesh, sub: &Submesh, default: &'a Material) -> &'a Material {
-    sub.material
-        .and_then(|m| mesh.materials.get(m))
-        .unwrap_or(default)
-}
-
-/// The one output material: factors baked (white), no UV transform, alpha mode strong enough for
-/// every input (Blend > Mask > Opaque), double-sided if any input is, and the mean metallic and
-/// roughness over the submeshes' materials (one vote per submesh).
-fn merge_materials(mesh: &InstancedMesh) -> Material {
-    let default = Material::default();
-    let used: Vec<&Material> = mesh
-        .submeshes
-        .iter()
-        .map(|s| material_of(mesh, s, &default))
-        .collect();
-    let n = used.len().max(1) as f32;
-    let blend = used.iter().any(|m| m.alpha_mode == AlphaMode::Blend);
-    let mask = used
-        .iter()
-        .any(|m| matches!(m.alpha_mode, AlphaMode::Mask { .. }));
-    let alpha_mode = if blend {
-        AlphaMode::Blend
-    } else if mask {
-        AlphaMode::Mask { cutoff: 0.5 }
-    } else {
-        AlphaMode::Opaque
-    };
-    Material {
-        name: Some("atlas".to_string()),
-        base_color_factor: Vec4::ONE,
-        base_color_texture: Some(TextureRef {
-            texture: 0,
-            transform: None,
-        }),
-        metallic_factor: if used.is_empty() {
-            0.0
-        } else {
-            used.iter().map(|m| m.metallic_factor).sum::<f32>() / n
-        },
-        roughness_factor: if used.is_empty() {
-            1.0
-        } else {
-            used.iter().map(|m| m.roughness_factor).sum::<f32>() / n
-        },
-        alpha_mode,
-        double_sided: used.iter().any(|m| m.double_sided),
-    }
 }
 
 /// Puts the output mesh together.

@@ -1,15 +1,17 @@
-//! Stage 2: scale and pack. The placement is a crate's; this file only chooses the global texel
-//! scale and checks what the packer returned (see Jylänki, "A thousand ways to pack the bin"):
+//! Stage 2: scale and pack. The placement is a crate's; this file chooses the global texel
+//! scale, the packer and the square, and checks what the packer returned with
+//! [`Layout::validate`] (see Jylänki, "A thousand ways to pack the bin"):
 //! - up to [`MAXRECTS_MAX_CHARTS`] charts, `crunch` (maximal rectangles, largest items first,
-//!   best-area fit), the tightest of the two;
+//!   best-area fit), the tighter of the two at those counts;
 //! - beyond, `guillotiere` (a guillotine allocator, items offered largest area first).
-//!   Maximal rectangles costs O(n^2) per packing and a layout takes a dozen packings: on the
-//!   upper aggregates of a city (thousands of charts) it was most of the whole rebuild.
+//!   Maximal rectangles costs O(n^2) per packing and a layout takes a dozen packings, which at
+//!   thousands of charts would be seconds per atlas.
 
 use glam::DVec2;
 
 use crate::chart::Chart;
-use crate::AtlasError;
+use crate::error::AtlasError;
+use crate::layout::{Layout, PackedRect};
 
 /// Largest atlas side the packer is asked for: the common GPU texture limit.
 const PACKER_MAX_SIDE: u32 = 16384;
@@ -32,92 +34,6 @@ const REFINE_STEPS: usize = 4;
 /// Growth of the square tried when tightening the atlas around the charts: five percent wastes
 /// at most a tenth of the area over the tightest square the packer manages.
 const TIGHTEN_STEP: f64 = 1.05;
-
-/// Where the charts went. Each rectangle's content is `width x height` texels at `(x, y)`; the
-/// gutter surrounds it, so the padded rectangle is `(x - gutter, y - gutter)` of size
-/// `(width + 2 gutter, height + 2 gutter)`.
-///
-/// Invariants (checked by [`Layout::validate`]): every content rectangle is non-empty, every
-/// padded rectangle lies inside `width x height`, and no two padded rectangles overlap.
-#[derive(Clone, Debug, Default, PartialEq, Eq)]
-pub struct Layout {
-    /// Atlas width in texels: the packed extent, not the side the packer was given.
-    pub width: u32,
-    /// Atlas height in texels.
-    pub height: u32,
-    /// Texels of padding on each side of every rectangle.
-    pub gutter: u32,
-    /// One rectangle per input size, in input order.
-    pub rects: Vec<PackedRect>,
-}
-
-/// One chart's content rectangle in the atlas, gutter excluded.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct PackedRect {
-    /// Left edge in texels.
-    pub x: u32,
-    /// Top edge in texels.
-    pub y: u32,
-    /// Width in texels.
-    pub width: u32,
-    /// Height in texels.
-    pub height: u32,
-}
-
-/// A broken [`Layout`] invariant.
-#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
-pub enum LayoutError {
-    /// A rectangle has no area.
-    #[error("rectangle {0} is empty")]
-    Empty(usize),
-    /// A padded rectangle leaves the atlas.
-    #[error("rectangle {0} with its gutter leaves the atlas")]
-    Outside(usize),
-    /// Two padded rectangles share texels.
-    #[error("rectangles {0} and {1} overlap with their gutters")]
-    Overlap(usize, usize),
-}
-
-impl Layout {
-    /// Checks every invariant listed on the type.
-    pub fn validate(&self) -> Result<(), LayoutError> {
-        let g = u64::from(self.gutter);
-        // Padded rectangles as [x0, x1) x [y0, y1) in u64, so no sum overflows.
-        let mut padded = Vec::with_capacity(self.rects.len());
-        for (i, r) in self.rects.iter().enumerate() {
-            if r.width == 0 || r.height == 0 {
-                return Err(LayoutError::Empty(i));
-            }
-            let (x, y) = (u64::from(r.x), u64::from(r.y));
-            let (x1, y1) = (x + u64::from(r.width) + g, y + u64::from(r.height) + g);
-            if x < g || y < g || x1 > u64::from(self.width) || y1 > u64::from(self.height) {
-                return Err(LayoutError::Outside(i));
-            }
-            padded.push((x - g, x1, y - g, y1, i));
-        }
-        // Sweep along x: only rectangles starting before one ends can overlap it.
-        padded.sort_unstable();
-        for (k, a) in padded.iter().enumerate() {
-            for b in padded[k + 1..].iter().take_while(|b| b.0 < a.1) {
-                if b.2 < a.3 && a.2 < b.3 {
-                    return Err(LayoutError::Overlap(a.4.min(b.4), a.4.max(b.4)));
-                }
-            }
-        }
-        Ok(())
-    }
-
-    /// The padded rectangle of `rect` as `(x0, y0, x1, y1)`, end-exclusive.
-    pub fn padded(&self, rect: &PackedRect) -> (u32, u32, u32, u32) {
-        let g = self.gutter;
-        (
-            rect.x - g,
-            rect.y - g,
-            rect.x + rect.width + g,
-            rect.y + rect.height + g,
-        )
-    }
-}
 
 /// Packs rectangles of the given `(width, height)` sizes, each with `gutter` texels around it,
 /// into a `max_side x max_side` square. `None` when they do not all fit, or a size is zero. The
@@ -313,35 +229,5 @@ mod tests {
         // A 10x10 rectangle with a gutter of 1 needs 12 texels per side.
         assert!(pack_rects(&[(10, 10)], 1, 11).is_none());
         assert!(pack_rects(&[(10, 10)], 1, 12).is_some());
-    }
-
-    #[test]
-    fn validate_catches_overlap_and_outside() {
-        let mut layout = Layout {
-            width: 10,
-            height: 10,
-            gutter: 1,
-            rects: vec![
-                PackedRect {
-                    x: 1,
-                    y: 1,
-                    width: 3,
-                    height: 3,
-                },
-                PackedRect {
-                    x: 5,
-                    y: 1,
-                    width: 3,
-                    height: 3,
-                },
-            ],
-        };
-        // Padded: [0,5) and [4,9) in x share column 4.
-        assert_eq!(layout.validate(), Err(LayoutError::Overlap(0, 1)));
-        layout.rects[1].x = 6;
-        assert_eq!(layout.validate(), Ok(()));
-        layout.rects[1].x = 7;
-        // [6, 11) leaves the 10-wide atlas.
-        assert_eq!(layout.validate(), Err(LayoutError::Outside(1)));
     }
 }

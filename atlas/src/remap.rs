@@ -8,7 +8,7 @@ use glam::{DVec2, Vec2};
 use horizon_mesh::model::{InstancedMesh, Submesh};
 
 use crate::chart::{Chart, Charting};
-use crate::pack::{Layout, PackedRect};
+use crate::layout::{Layout, PackedRect};
 
 /// The submeshes of `mesh` with atlas UVs and material 0; everything else is copied.
 pub(crate) fn remap_uvs(
