@@ -26,6 +26,7 @@ use horizon_bvh::{
     Bvh, BvhOptions, Cut, CutQuery, CutWorkspace, NewObject, SpatialBaseline, SpatialCut,
     SpatialWorkspace, Sphere, StandingOptions, StandingQuery, SHAPE_LEN, TEXTURE_LEN,
 };
+use horizon_mesh::rng::Rng;
 
 /// Budget of every query (the target is stated for 4,000 results).
 const MAX_RESULTS: usize = 4000;
@@ -141,7 +142,7 @@ fn main() {
 }
 
 fn report_queries(name: &str, bvh: &Bvh, omega: f32, queries: usize) {
-    let mut rng = Rng(0xC0FFEE);
+    let mut rng = Rng::new(0xC0FFEE);
     let mut workspace = CutWorkspace::new();
     let mut cut = Cut::default();
     let mut times = Vec::with_capacity(queries);
@@ -187,7 +188,7 @@ fn report_queries(name: &str, bvh: &Bvh, omega: f32, queries: usize) {
 
 /// The same viewpoints as `report_queries`, on the spatial baseline.
 fn report_spatial(spatial: &SpatialBaseline, omega: f32, queries: usize) {
-    let mut rng = Rng(0xC0FFEE);
+    let mut rng = Rng::new(0xC0FFEE);
     let mut workspace = SpatialWorkspace::default();
     let mut cut = SpatialCut::default();
     let mut times = Vec::with_capacity(queries);
@@ -241,7 +242,7 @@ fn report_standing(name: &str, bvh: &Bvh, omega: f32, steps: usize) {
     let mut changes = Vec::with_capacity(steps);
     let mut visited = Vec::with_capacity(steps);
     let mut fallbacks = 0usize;
-    let mut rng = Rng(0x57A9D);
+    let mut rng = Rng::new(0x57A9D);
     for _ in 0..steps {
         heading += rng.range(-0.05, 0.05);
         position += Vec3::new(heading.cos(), heading.sin(), 0.0);
@@ -281,7 +282,7 @@ struct World {
 
 impl World {
     fn generate(n: usize, seed: u64) -> Self {
-        let mut rng = Rng(seed);
+        let mut rng = Rng::new(seed);
         // Class centres.
         let shape_centres: Vec<f32> = (0..CLASSES * SHAPE_LEN)
             .map(|_| rng.range(0.0, 0.3))
@@ -326,26 +327,5 @@ impl World {
             shape: &self.shape[i * SHAPE_LEN..(i + 1) * SHAPE_LEN],
             texture: &self.texture[i * TEXTURE_LEN..(i + 1) * TEXTURE_LEN],
         }
-    }
-}
-
-/// SplitMix64, so the example needs no `rand`.
-struct Rng(u64);
-
-impl Rng {
-    fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-
-    fn range(&mut self, lo: f32, hi: f32) -> f32 {
-        lo + (hi - lo) * ((self.next_u64() >> 40) as f32 / (1u64 << 24) as f32)
-    }
-
-    fn below(&mut self, n: usize) -> usize {
-        (self.next_u64() % n as u64) as usize
     }
 }

@@ -66,7 +66,7 @@ proptest! {
     ) {
         let options = BvhOptions::with_branching(branching).with_weights(mu, 0.2);
         let mut bvh = Bvh::new(options).expect("valid options");
-        let mut rng = Rng(seed);
+        let mut rng = Rng::new(seed);
         // The model: what each live object's sphere should be.
         let mut live: Vec<(ObjectId, Sphere)> = Vec::new();
         for op in ops {
@@ -113,7 +113,7 @@ proptest! {
         branching in 2usize..=12,
         queries in vec((point(300.0), -7.0f32..1.5, 0usize..300), 1..8),
     ) {
-        let mut rng = Rng(seed);
+        let mut rng = Rng::new(seed);
         let objects: Vec<Obj> = (0..n)
             .map(|_| {
                 let at = Vec3::new(rng.range(0.0, 250.0), rng.range(0.0, 250.0), rng.range(0.0, 10.0));
@@ -158,7 +158,7 @@ proptest! {
                 object(Vec3::new(x as f32, y as f32, 0.0) * 10.0, 1.0, class)
             })
             .collect();
-        Rng(seed).shuffle(&mut objects);
+        Rng::new(seed).shuffle(&mut objects);
         let purity = |mu: f32| {
             let mut bvh = Bvh::new(BvhOptions::default().with_weights(mu, 0.2)).expect("valid");
             let ids = insert_all(&mut bvh, &objects);

@@ -15,7 +15,7 @@ use horizon_bvh::{
 use proptest::prelude::*;
 
 fn world(seed: u64, n: usize) -> Vec<Obj> {
-    let mut rng = Rng(seed);
+    let mut rng = Rng::new(seed);
     (0..n)
         .map(|_| {
             let at = Vec3::new(

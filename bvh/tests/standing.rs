@@ -148,7 +148,7 @@ fn op() -> impl Strategy<Value = Op> {
 }
 
 fn world(seed: u64, n: usize) -> Vec<Obj> {
-    let mut rng = Rng(seed);
+    let mut rng = Rng::new(seed);
     (0..n)
         .map(|_| {
             let at = Vec3::new(
@@ -402,7 +402,7 @@ fn refinement_and_coarsening_load_before_dropping() {
 #[test]
 fn splits_reparent_and_removals_are_permanent() {
     let mut bvh = Bvh::new(BvhOptions::with_branching(4)).expect("valid");
-    let mut rng = Rng(7);
+    let mut rng = Rng::new(7);
     let ids = insert_all(
         &mut bvh,
         &(0..4)

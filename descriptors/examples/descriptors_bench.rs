@@ -16,6 +16,7 @@ use std::time::Instant;
 
 use glam::{Affine3A, Quat, Vec3};
 use horizon_descriptors::{describe, describe_batch, z_diff, DescriptorOptions, Descriptors};
+use horizon_mesh::rng::Rng;
 use horizon_mesh::{import_file, ImportOptions, InstancedMesh};
 use horizon_simplify::{simplify, SimplifyOptions, Target};
 use serde::Serialize;
@@ -136,7 +137,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     distinct.sort_by(f32::total_cmp);
     let median = distinct[distinct.len() / 2];
     let mut invariance = Vec::new();
-    let mut rng = 0x5EED_u64;
+    let mut rng = Rng::new(0x5EED);
     for ((name, mesh), (_, base)) in models[..SHARED.len()].iter().zip(&shared) {
         let moved: Vec<InstancedMesh> = (0..MOTIONS).map(|_| moved(mesh, &mut rng)).collect();
         let worst = describe_batch(&moved, &options)
@@ -174,14 +175,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
 }
 
 /// The model under a seeded random rotation, uniform scale in [0.1, 10] and translation.
-fn moved(mesh: &InstancedMesh, rng: &mut u64) -> InstancedMesh {
-    let mut next = || {
-        *rng = rng.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = *rng;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        ((z ^ (z >> 31)) >> 11) as f32 / (1u64 << 53) as f32
-    };
+fn moved(mesh: &InstancedMesh, rng: &mut Rng) -> InstancedMesh {
+    let mut next = || rng.unit();
     let axis = Vec3::new(next() - 0.5, next() - 0.5, next() - 0.5).normalize_or(Vec3::Z);
     let rotation = Quat::from_axis_angle(axis, next() * std::f32::consts::TAU);
     let scale = 10f32.powf(next() * 2.0 - 1.0);

@@ -844,6 +844,7 @@ fn accumulate_areas(grid: &VoxelGrid, ranks: &[u32], weights: &mut [f32], v: [DV
 #[cfg(test)]
 mod tests {
     use glam::{Affine3A, Quat};
+    use horizon_mesh::rng::Rng;
     use horizon_mesh::{Instance, Submesh};
 
     use super::*;
@@ -929,13 +930,8 @@ mod tests {
     fn rasterizer_matches_brute_force_separating_axes() {
         // Skewed triangles in every orientation, compared cell by cell against the plain
         // 13-axis test. Vertices are kept off the integer lattice so ties do not arise.
-        let mut seed = 0x9E37_79B9_7F4A_7C15u64;
-        let mut next = || {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (seed >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rng = Rng::new(0x5EED_0001);
+        let mut next = || rng.unit_f64();
         for case in 0..200 {
             let scale = if case % 2 == 0 { 3.0 } else { 12.0 };
             let v = [0; 3]
@@ -1028,13 +1024,8 @@ mod tests {
         // Clipped pieces tile the triangle: the weights of one triangle sum to its area in
         // square cells, for skewed triangles of every size and orientation, and only cells
         // the separating-axis test marked carry weight.
-        let mut seed = 0x2545_F491_4F6C_DD1Du64;
-        let mut next = || {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (seed >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rng = Rng::new(0x5EED_0002);
+        let mut next = || rng.unit_f64();
         for case in 0..200 {
             let scale = [0.3, 3.0, 12.0][case % 3];
             let v = [0; 3].map(|_| DVec3::new(next(), next(), next()) * scale + 1.7);

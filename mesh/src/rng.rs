@@ -30,6 +30,15 @@ impl Rng {
         Self::new(mix(self.state ^ mix(stream.wrapping_add(GOLDEN_GAMMA))))
     }
 
+    /// Moves the generator `draws` outputs ahead in constant time: the state is a counter, so
+    /// skipping is one multiply-add.
+    ///
+    /// Parallel workers that each take a fixed slice of one sequence start from a clone skipped
+    /// to their offset, and draw the same numbers as one sequential pass would.
+    pub fn skip(&mut self, draws: u64) {
+        self.state = self.state.wrapping_add(draws.wrapping_mul(GOLDEN_GAMMA));
+    }
+
     /// The next 64 random bits.
     pub fn next_u64(&mut self) -> u64 {
         self.state = self.state.wrapping_add(GOLDEN_GAMMA);
@@ -39,6 +48,12 @@ impl Rng {
     /// A uniform float in `[0, 1)` with 24 bits of precision.
     pub fn unit(&mut self) -> f32 {
         (self.next_u64() >> 40) as f32 * (1.0 / (1u64 << 24) as f32)
+    }
+
+    /// A uniform double in `[0, 1)` with 53 bits of precision (every double of the form
+    /// `k / 2^53`), for samplers whose positions must not be quantised to 24 bits.
+    pub fn unit_f64(&mut self) -> f64 {
+        (self.next_u64() >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
     }
 
     /// A uniform float in `[lo, hi)`.
@@ -89,6 +104,17 @@ pub fn mix(mut z: u64) -> u64 {
     z ^ (z >> 31)
 }
 
+/// A 64-bit hash of `words` under `seed`: each word is XORed into the running value, which one
+/// SplitMix64 step (add the increment, then [`mix`]) then scrambles.
+///
+/// For values that must be drawn from the data itself rather than from a sequence, e.g. a
+/// displacement keyed by a vertex position, so that equal inputs get equal draws in any order.
+pub fn hash(seed: u64, words: impl IntoIterator<Item = u64>) -> u64 {
+    words.into_iter().fold(seed ^ GOLDEN_GAMMA, |h, w| {
+        mix((h ^ w).wrapping_add(GOLDEN_GAMMA))
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -109,6 +135,44 @@ mod tests {
             assert!((0.0..1.0).contains(&u));
             assert!(rng.below(13) < 13);
         }
+    }
+
+    #[test]
+    fn unit_f64_uses_the_top_53_bits() {
+        // The same draw as `next_u64`, scaled: every value is a multiple of 2^-53 in [0, 1).
+        let mut a = Rng::new(99);
+        let mut b = Rng::new(99);
+        for _ in 0..10_000 {
+            let u = a.unit_f64();
+            assert!((0.0..1.0).contains(&u));
+            assert_eq!(u * (1u64 << 53) as f64, (b.next_u64() >> 11) as f64);
+        }
+    }
+
+    #[test]
+    fn skip_equals_drawing() {
+        // Skipping n draws lands where n calls to `next_u64` do, for n = 0 and for n past the
+        // point where n times the increment wraps around 2^64.
+        for n in [0u64, 1, 2, 3, 17, 1000] {
+            let mut drawn = Rng::new(5);
+            for _ in 0..n {
+                drawn.next_u64();
+            }
+            let mut skipped = Rng::new(5);
+            skipped.skip(n);
+            assert_eq!(skipped.next_u64(), drawn.next_u64(), "n = {n}");
+        }
+    }
+
+    #[test]
+    fn hash_is_a_chain_of_splitmix_steps() {
+        // No words: the seeded start value itself. One word: one generator step from the start
+        // value with the word XORed in. Order matters and equal inputs hash equally.
+        assert_eq!(hash(3, []), 3 ^ GOLDEN_GAMMA);
+        assert_eq!(hash(3, [7]), Rng::new(3 ^ GOLDEN_GAMMA ^ 7).next_u64());
+        assert_eq!(hash(3, [1, 2]), hash(3, [1, 2]));
+        assert_ne!(hash(3, [1, 2]), hash(3, [2, 1]));
+        assert_ne!(hash(3, [1, 2]), hash(4, [1, 2]));
     }
 
     #[test]

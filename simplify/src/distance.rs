@@ -30,6 +30,7 @@ mod triangle;
 use std::time::Instant;
 
 use glam::{DVec3, Vec3};
+use horizon_mesh::rng::{mix, Rng};
 use horizon_mesh::{ExpandedMesh, InstancedMesh};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -358,6 +359,9 @@ fn edge_samples(mesh: &ExpandedMesh, budget: usize) -> Vec<DVec3> {
 /// `count` area-uniform points: sample `i` falls at cumulative area `(i + u) / count` of the
 /// total (stratified), at a uniformly random point of that triangle. Zero-area triangles are
 /// never chosen; if all are zero-area there are no face samples.
+///
+/// Sample `i` takes draws `3i .. 3i + 3` of one seeded sequence, so each parallel task skips to
+/// its own draws and the points do not depend on the thread count.
 fn face_samples(mesh: &ExpandedMesh, count: usize, seed: u64, stream: u64) -> Vec<DVec3> {
     let corners = |t: usize| {
         let i = &mesh.indices[3 * t..3 * t + 3];
@@ -374,37 +378,23 @@ fn face_samples(mesh: &ExpandedMesh, count: usize, seed: u64, stream: u64) -> Ve
     if count == 0 || total <= 0.0 {
         return Vec::new();
     }
-    let key = mix(seed ^ mix(stream));
+    let sequence = Rng::new(mix(seed ^ mix(stream)));
     (0..count)
         .into_par_iter()
         .map(|i| {
-            let base = key.wrapping_add((i as u64).wrapping_mul(3).wrapping_mul(GOLDEN));
-            let target = (i as f64 + uniform(base, 0)) / count as f64 * total;
+            let mut rng = sequence.clone();
+            rng.skip(3 * i as u64);
+            let target = (i as f64 + rng.unit_f64()) / count as f64 * total;
             let t = cumulative
                 .partition_point(|&c| c <= target)
                 .min(triangles - 1);
             let [a, b, c] = corners(t);
-            let s = uniform(base, 1).sqrt();
-            let r = uniform(base, 2);
+            let s = rng.unit_f64().sqrt();
+            let r = rng.unit_f64();
             // Relative to a, so that a coordinate shared by all three vertices stays exact.
             a + (b - a) * (s * (1.0 - r)) + (c - a) * (s * r)
         })
         .collect()
-}
-
-const GOLDEN: u64 = 0x9E37_79B9_7F4A_7C15;
-
-/// SplitMix64's finaliser: a bijective 64-bit mix.
-fn mix(mut z: u64) -> u64 {
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^ (z >> 31)
-}
-
-/// The `k`-th uniform number in [0, 1) of the sequence keyed by `base`.
-fn uniform(base: u64, k: u64) -> f64 {
-    let bits = mix(base.wrapping_add((k + 1).wrapping_mul(GOLDEN)));
-    (bits >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -8,6 +8,7 @@ use horizon_atlas::{build_atlas, AtlasOptions, AtlasReport};
 use horizon_mesh::model::{
     AlphaMode, Instance, InstancedMesh, Material, Submesh, Texture, TextureRef, Wrap,
 };
+use horizon_mesh::rng::Rng;
 use image::{Rgba, RgbaImage};
 
 /// Encodes an image as a PNG texture with the given wrap modes.
@@ -35,16 +36,11 @@ pub fn gradient(width: u32, height: u32) -> RgbaImage {
     })
 }
 
-/// Seeded SplitMix64 noise, opaque unless `alpha`.
+/// Seeded noise from the workspace's generator, opaque unless `alpha`.
 pub fn noise(width: u32, height: u32, seed: u64, alpha: bool) -> RgbaImage {
-    let mut state = seed;
+    let mut rng = Rng::new(seed);
     RgbaImage::from_fn(width, height, |_, _| {
-        state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = state;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^= z >> 31;
-        let b = z.to_le_bytes();
+        let b = rng.next_u64().to_le_bytes();
         Rgba([b[0], b[1], b[2], if alpha { b[3] } else { 255 }])
     })
 }

@@ -1,5 +1,5 @@
-//! Shared fixtures for the BVH tests: a seeded generator, objects with class descriptors, and
-//! the complete-view checker for cuts.
+//! Shared fixtures for the BVH tests: the workspace's seeded generator, objects with class
+//! descriptors, and the complete-view checker for cuts.
 
 #![allow(dead_code)]
 
@@ -11,40 +11,7 @@ use horizon_bvh::{
     SHAPE_LEN, TEXTURE_LEN,
 };
 
-/// SplitMix64: a tiny seeded generator, so tests need no `rand`.
-#[derive(Debug, Clone)]
-pub struct Rng(pub u64);
-
-impl Rng {
-    pub fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-
-    /// Uniform in [0, 1).
-    pub fn unit(&mut self) -> f32 {
-        (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32
-    }
-
-    /// Uniform in [lo, hi).
-    pub fn range(&mut self, lo: f32, hi: f32) -> f32 {
-        lo + (hi - lo) * self.unit()
-    }
-
-    /// Uniform in 0..n.
-    pub fn below(&mut self, n: usize) -> usize {
-        (self.next_u64() % n as u64) as usize
-    }
-
-    pub fn shuffle<T>(&mut self, v: &mut [T]) {
-        for i in (1..v.len()).rev() {
-            v.swap(i, self.below(i + 1));
-        }
-    }
-}
+pub use horizon_mesh::rng::Rng;
 
 /// An owned object to insert.
 #[derive(Debug, Clone)]

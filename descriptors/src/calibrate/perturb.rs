@@ -3,6 +3,7 @@
 //! so the calibration sees pairs on both sides of "indistinguishable".
 
 use glam::{Vec3, Vec4};
+use horizon_mesh::rng::hash;
 use horizon_mesh::{InstancedMesh, Material};
 
 /// A named way to perturb a model.
@@ -198,17 +199,10 @@ fn instance_area(mesh: &InstancedMesh, instance: &horizon_mesh::Instance) -> f32
         .sum()
 }
 
-/// A 64-bit hash of a position's bits and a seed (SplitMix64 finaliser).
+/// A 64-bit hash of a position's bits and a seed: equal positions get equal hashes, whatever
+/// the order they are visited in.
 fn hash3(p: Vec3, seed: u64) -> u64 {
-    let mut h = seed ^ 0x9E37_79B9_7F4A_7C15;
-    for c in p.to_array() {
-        h ^= u64::from(c.to_bits());
-        h = h.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        h = (h ^ (h >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        h = (h ^ (h >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        h ^= h >> 31;
-    }
-    h
+    hash(seed, p.to_array().map(|c| u64::from(c.to_bits())))
 }
 
 /// 21 bits of `h` as a number in [-1, 1].

@@ -12,6 +12,7 @@
 //! corner samples would pick the same few texels in every tile.
 
 use glam::{DVec2, Vec4};
+use horizon_mesh::rng::mix;
 use horizon_mesh::Wrap;
 
 use super::hmmd::{linear_to_srgb8, srgb8_to_linear, Hmmd};
@@ -252,7 +253,8 @@ fn barycentric(t: &[DVec2; 3], p: DVec2) -> [f32; 3] {
     [wa as f32, wb as f32, wc as f32]
 }
 
-/// Jitter of the sample row of cell row `cy`, in `0..k`.
+/// Jitter of the sample row of cell row `cy`, in `0..k`. The constant salts the key, so that
+/// row `cy`'s jitter is not the column jitter of cell `(cy, 0)`.
 fn row_jitter(cy: usize, k: u64) -> u64 {
     mix(cy as u64 ^ 0x9e37_79b9_7f4a_7c15) % k
 }
@@ -260,11 +262,4 @@ fn row_jitter(cy: usize, k: u64) -> u64 {
 /// Jitter of the sample column of cell `(cx, cy)`, in `0..k`.
 fn column_jitter(cx: usize, cy: usize, k: u64) -> u64 {
     mix((cy as u64).rotate_left(32) ^ cx as u64) % k
-}
-
-/// SplitMix64's finaliser: a fixed, well-mixed hash.
-fn mix(mut z: u64) -> u64 {
-    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-    z ^ (z >> 31)
 }

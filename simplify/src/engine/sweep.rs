@@ -430,6 +430,7 @@ mod tests {
     //! The sweeps' promise: the same collapses as one queue, on any number of threads, and a
     //! sweep that reaches the target changes nothing.
     use glam::{Affine3A, Quat, Vec2, Vec3};
+    use horizon_mesh::rng::Rng;
     use horizon_mesh::{Instance, InstancedMesh, Submesh};
     use proptest::prelude::*;
 
@@ -440,13 +441,8 @@ mod tests {
     /// three times (one mirrored). Random heights keep every cost distinct, so that no tie
     /// leaves the order to chance.
     fn pieces(pieces: usize, seed: u64) -> InstancedMesh {
-        let mut rng = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
-        let mut next = move || {
-            rng ^= rng << 13;
-            rng ^= rng >> 7;
-            rng ^= rng << 17;
-            (rng >> 11) as f32 / (1u64 << 53) as f32
-        };
+        let mut rng = Rng::new(seed);
+        let mut next = move || rng.unit();
         let n = 7u32;
         let mut grid = |origin: Vec3, sub: &mut Submesh| {
             let base = sub.positions.len() as u32;
