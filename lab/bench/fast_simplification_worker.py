@@ -1,4 +1,4 @@
-"""One fast-simplification run for bench/table3.py, in a process of its own so that its peak RSS
+"""One fast-simplification run for lab/bench/table3.py, in a process of its own so that its peak RSS
 is measured apart from the benchmark's: loads the expanded, position-welded mesh from IN.npz
 (arrays v, f), times only the fast_simplification.simplify call (agg=7, target_reduction =
 1 - RATIO), writes the result as OUT.ply and prints one JSON line
@@ -13,7 +13,8 @@ import time
 import fast_simplification  # noqa: F401 - imported before the clock starts
 import numpy as np
 
-sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "tests" / "reference"))
+# lab/bench/fast_simplification_worker.py -> the repository's tests/reference
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[2] / "tests" / "reference"))
 import check_simplify as cs  # noqa: E402
 
 

@@ -1,20 +1,23 @@
 """Figure 6 of the core paper: average join download over mu and w, next to the query cost.
 
-For each world directory given (generated with `horizon gen world`), and each (mu, w) of the
-grid, builds the BVH and every aggregate (`horizon build --mu --omega`), then measures the
-join download of ten seeded viewpoints (`horizon report --json`), with the query cost of the
-same cuts (entries and aggregates per cut; `horizon sweep` gives nodes visited over the full
-grid, in figure5.md). Writes bench/results/NAME.{md,json} (NAME default figure6).
+For each world directory given (generated with `horizon-lab gen world`), and each (mu, w) of
+the grid, builds the BVH and every aggregate (`horizon build --mu --omega`), then measures the
+join download of ten seeded viewpoints (`horizon-lab report --json`), with the query cost of the
+same cuts (entries and aggregates per cut; `horizon-lab sweep` gives nodes visited over the full
+grid, in lab/results/figure5.md). Writes lab/results/NAME.{md,json} (NAME default figure6).
+HORIZON_BINARY is the product binary; the horizon-lab binary beside it runs `report`.
 
 Usage: figure6.py HORIZON_BINARY DIR [DIR...] [--mu 0,0.4,0.8,1] [--w 0.2] [--name NAME]
-       [--rows FILE]   (start from the rows of an earlier run's JSON, e.g. to render it again)"""
+       [--rows FILE]   (start from the rows of an earlier run's JSON, e.g. to render it again)
+       [--out DIR]     (write NAME.{md,json} there instead of lab/results)"""
 import json
 import pathlib
 import subprocess
 import sys
 import time
 
-ROOT = pathlib.Path(__file__).resolve().parents[1]
+ROOT = pathlib.Path(__file__).resolve().parents[2]  # lab/bench/figure6.py -> the repository
+RESULTS = ROOT / "lab" / "results"
 
 
 def run(cmd):
@@ -26,10 +29,15 @@ def run(cmd):
 
 def main(argv):
     horizon, rest = argv[0], argv[1:]
+    lab = str(pathlib.Path(horizon).with_name("horizon-lab"))
     mus, ws, dirs, out_name, rows_from = [0.0, 0.4, 0.8, 1.0], [0.2], [], "figure6", None
+    out = RESULTS
     k = 0
     while k < len(rest):
-        if rest[k] == "--rows":
+        if rest[k] == "--out":
+            out = pathlib.Path(rest[k + 1])
+            k += 2
+        elif rest[k] == "--rows":
             rows_from = rest[k + 1]
             k += 2
         elif rest[k] == "--name":
@@ -53,7 +61,7 @@ def main(argv):
                 build = json.loads(
                     run([horizon, "build", d, "--mu", str(mu), "--omega", str(w), "--json"])
                 )
-                report = json.loads(run([horizon, "report", d, "--views", "10", "--seed", "1", "--json"]))
+                report = json.loads(run([lab, "report", d, "--views", "10", "--seed", "1", "--json"]))
                 row = {
                     "world": name,
                     "mu": mu,
@@ -69,18 +77,17 @@ def main(argv):
                 }
                 rows.append(row)
                 print(json.dumps(row), flush=True)
-    out = ROOT / "bench" / "results"
     out.mkdir(parents=True, exist_ok=True)
-    # Next to the query cost of the BVH sweep (figure5.md, `horizon sweep`), where it has the
-    # same world and (mu, w).
-    cost = figure5_costs(out / "figure5.md")
+    # Next to the query cost of the BVH sweep (lab/results/figure5.md, `horizon-lab sweep`),
+    # where it has the same world and (mu, w).
+    cost = figure5_costs(RESULTS / "figure5.md")
     for r in rows:
         r["nodes_visited"] = cost.get((r["world"], r["mu"], r["w"]))
     (out / f"{out_name}.json").write_text(json.dumps(rows, indent=1))
     lines = [
         "# Figure 6: join download over mu and w",
         "",
-        f"`python3 bench/figure6.py target/release/horizon DIR... --mu {','.join(map(str, mus))} --w {','.join(map(str, ws))}`, one run on this machine (2 cores);",
+        f"`python3 lab/bench/figure6.py target/release/horizon DIR... --mu {','.join(map(str, mus))} --w {','.join(map(str, ws))}`, one run on this machine (2 cores);",
         "10 seeded viewpoints, Omega_min 1e-3, at most 4000 entries per cut. Query cost: nodes",
         "visited per cut of the same (world, mu, w) tree in the BVH sweep (figure5.md, 100",
         "viewpoints), and entries and aggregates of these cuts. Build seconds are not comparable",

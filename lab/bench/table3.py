@@ -6,16 +6,20 @@ Every model is simplified to 20% of its expanded triangles by
   qem                  `horizon simplify --method qem`  (our engine on the expanded mesh)
   meshopt              `horizon simplify --method meshopt` (meshoptimizer, expanded and welded)
   fast-simplification  fast_simplification.simplify(agg=7) on the expanded mesh welded by
-                       position, in its own Python process (bench/fast_simplification_worker.py)
+                       position, in its own Python process (lab/bench/fast_simplification_worker.py)
 each in a subprocess, --runs times. Per method it records the median of the reported
 simplification seconds and of the subprocess's peak RSS (os.wait4), the output GLB bytes (the
 fast-simplification output is converted to GLB by `horizon mesh convert`), the expanded output
 triangles (counted by tests/reference, independently of Horizon), the Hausdorff distance to the
-input relative to the input's bounding-box diagonal by `horizon mesh distance` (ours) and by
+input relative to the input's bounding-box diagonal by `horizon-lab distance` (ours) and by
 pymeshlab's get_hausdorff_distance (both directions, vertex+edge+face samples), and the Khronos
 glTF-Validator's errors for every GLB written. The models are maple-tree, village-mesh,
-patio-chair and stonehenge from `horizon gen model NAME OUT --seed 1`, the bunny, and every
+patio-chair and stonehenge from `horizon-lab gen model NAME OUT --seed 1`, the bunny, and every
 model in assets/models with a mesh placed at least twice.
+
+The product binary `horizon` (--horizon) runs simplify, mesh stats and mesh convert; the lab
+binary `horizon-lab` (--lab, default: the `horizon-lab` beside the `horizon` binary) runs
+gen model and distance.
 
 Writes OUT/table3.json (all raw numbers, machine info) and OUT/table3.md (the tables and the
 PASS/FAIL targets). Progress goes to stderr. Exit status 0 when the measurements ran (whatever
@@ -65,7 +69,7 @@ for line in sys.stdin:
 _spawner = subprocess.Popen([sys.executable, "-S", "-c", SPAWNER], stdin=subprocess.PIPE,
                             stdout=subprocess.PIPE, text=True)
 
-ROOT = pathlib.Path(__file__).resolve().parents[1]
+ROOT = pathlib.Path(__file__).resolve().parents[2]  # lab/bench/table3.py -> the repository
 sys.path.insert(0, str(ROOT / "tests" / "reference"))
 import check_simplify as cs  # noqa: E402
 import gltf_reference as ref  # noqa: E402
@@ -79,7 +83,7 @@ BUNNY = ROOT / "assets" / "models" / "bunny_trimesh" / "bunny.ply"
 HORIZON_METHODS = ["ias", "qem", "meshopt"]
 METHODS = HORIZON_METHODS + ["fast-simplification"]
 SHORT = {"ias": "IAS", "qem": "QEM", "meshopt": "meshopt", "fast-simplification": "fast-simpl."}
-WORKER = ROOT / "bench" / "fast_simplification_worker.py"
+WORKER = ROOT / "lab" / "bench" / "fast_simplification_worker.py"
 VALIDATE_MJS = ROOT / "tests" / "reference" / "validate.mjs"
 
 
@@ -106,7 +110,7 @@ def last_json(text):
     return json.loads(text.strip().splitlines()[-1])
 
 
-def machine_info(horizon):
+def machine_info(horizon, lab):
     cpu = "unknown"
     try:
         for line in open("/proc/cpuinfo"):
@@ -134,7 +138,14 @@ def machine_info(horizon):
             versions[mod] = version(mod.replace("_", "-"))
         except Exception:  # noqa: BLE001
             versions[mod] = None
-    hv = subprocess.run([str(horizon), "--version"], capture_output=True, text=True)
+
+    def version_of(binary):
+        try:
+            r = subprocess.run([str(binary), "--version"], capture_output=True, text=True)
+        except OSError:
+            return None
+        return r.stdout.strip() if r.returncode == 0 else None
+
     return {
         "nproc": len(os.sched_getaffinity(0)),
         "cpu_model": cpu,
@@ -145,7 +156,9 @@ def machine_info(horizon):
         "python": sys.version.split()[0],
         "packages": versions,
         "horizon": str(horizon),
-        "horizon_version": hv.stdout.strip(),
+        "horizon_version": version_of(horizon),
+        "horizon_lab": str(lab),
+        "horizon_lab_version": version_of(lab),
         "git_commit": git("rev-parse", "HEAD"),
         "git_dirty": bool(git("status", "--porcelain", "--untracked-files=no")),
         "loadavg_start": list(os.getloadavg()),
@@ -183,9 +196,10 @@ class Bench:
     def __init__(self, args, work):
         self.args = args
         self.horizon = pathlib.Path(args.horizon).resolve()
+        self.lab = lab_binary(args).resolve()
         self.work = work
-        self.has_distance = cs.has_command(self.horizon, "mesh", "distance")
-        self.has_gen = cs.has_command(self.horizon, "gen", "model")
+        self.has_distance = cs.has_command(self.lab, "distance")
+        self.has_gen = cs.has_command(self.lab, "gen", "model")
 
     # -- inputs ---------------------------------------------------------------------------------
 
@@ -193,12 +207,12 @@ class Bench:
         if name in GENERATED:
             out = self.work / f"{name}.glb"
             if not out.exists():
-                log(f"[{name}] horizon gen model {name} --seed 1")
-                code, _, err, rss, wall = run_measured([self.horizon, "gen", "model", name, out, "--seed", "1"])
+                log(f"[{name}] horizon-lab gen model {name} --seed 1")
+                code, _, err, rss, wall = run_measured([self.lab, "gen", "model", name, out, "--seed", "1"])
                 if code != 0:
-                    raise SystemExit(f"error: `horizon gen model {name}` failed: {err.strip()[:500]}")
+                    raise SystemExit(f"error: `horizon-lab gen model {name}` failed: {err.strip()[:500]}")
                 self.gen_seconds = wall
-            return out, "horizon gen model --seed 1"
+            return out, "horizon-lab gen model --seed 1"
         if name == "bunny":
             return BUNNY, str(BUNNY.relative_to(ROOT))
         return instanced[name][0], str(instanced[name][0].relative_to(ROOT))
@@ -292,9 +306,9 @@ class Bench:
         res["hausdorff_pymeshlab"] = cs.pymeshlab_hausdorff(vw, fw, ov, of, self.args.samples)
         res["hausdorff_pymeshlab"]["seconds"] = time.perf_counter() - t
         if self.has_distance:
-            log(f"[{name}] {method}: horizon mesh distance")
+            log(f"[{name}] {method}: horizon-lab distance")
             t = time.perf_counter()
-            res["hausdorff_ours"] = cs.horizon_json(self.horizon, "mesh", "distance", path, glb,
+            res["hausdorff_ours"] = cs.horizon_json(self.lab, "distance", path, glb,
                                                     "--samples", self.args.samples)
             res["hausdorff_ours"]["wall_seconds"] = time.perf_counter() - t
         else:
@@ -402,10 +416,11 @@ def markdown(result):
     names = list(models)
     L = []
     L.append("# Table 3: instance-aware simplification (Azim et al. 2014), reproduced\n")
-    L.append(f"Generated by `bench/table3.py` on {mach['date']}: {mach['cpu_model']}, {mach['nproc']} CPUs"
+    L.append(f"Generated by `lab/bench/table3.py` on {mach['date']}: {mach['cpu_model']}, {mach['nproc']} CPUs"
              f" (`nproc`), {mach['mem_total_gib']} GiB; load average {mach['loadavg_start'][0]:.2f} at the"
              f" start, {mach['loadavg_end'][0]:.2f} at the end. Horizon binary {mach['horizon']}"
-             f" (`{mach['horizon_version']}`, commit {(mach['git_commit'] or '?')[:10]}{', dirty tree' if mach['git_dirty'] else ''}).\n")
+             f" (`{mach['horizon_version']}`), lab binary {mach['horizon_lab']}"
+             f" (`{mach['horizon_lab_version']}`), commit {(mach['git_commit'] or '?')[:10]}{', dirty tree' if mach['git_dirty'] else ''}.\n")
     L.append(f"Every model is simplified to {cfg['ratio']:.0%} of its expanded triangles. Times are the median"
              f" of {cfg['runs']} runs (at least {SHORT_RUNS} for a method whose first run took under"
              f" {SHORT_SECONDS * 1000:.0f} ms) of the simplification proper as each method reports it (IAS: on the"
@@ -481,20 +496,28 @@ def markdown(result):
     return "\n".join(L)
 
 
+def lab_binary(args):
+    """The horizon-lab binary: --lab, else the one beside the horizon binary."""
+    return pathlib.Path(args.lab) if args.lab else cs.lab_binary(args.horizon)
+
+
 def main():
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--horizon", default=str(ROOT / "target" / "release" / "horizon"))
+    p.add_argument("--horizon", default=str(ROOT / "target" / "release" / "horizon"),
+                   help="the product binary (simplify, mesh stats, mesh convert)")
+    p.add_argument("--lab", help="the lab binary (gen model, distance; default: the horizon-lab"
+                                 " beside --horizon)")
     p.add_argument("--python", default=sys.executable,
                    help="interpreter for the fast-simplification subprocess (default: this one)")
     p.add_argument("--models", help="comma-separated subset (default: all)")
     p.add_argument("--runs", type=int, default=3)
     p.add_argument("--samples", type=int, default=100_000, help="Hausdorff samples per direction")
-    p.add_argument("--out", default=str(ROOT / "bench" / "results"))
+    p.add_argument("--out", default=str(ROOT / "lab" / "results"))
     p.add_argument("--work", help="folder for temporary files (default: a fresh temporary folder)")
     p.add_argument("--strict", action="store_true", help="exit 1 if a target fails")
     p.add_argument("--allow-missing", action="store_true",
-                   help="development only: skip generated models and our distance when the binary"
-                        " lacks `gen model` / `mesh distance` instead of failing")
+                   help="development only: skip generated models and our distance when the lab"
+                        " binary is missing or lacks `gen model` / `distance` instead of failing")
     args = p.parse_args()
     if args.runs < 1:
         p.error("--runs must be at least 1")
@@ -525,24 +548,27 @@ def main():
         bench = Bench(args, work)
         missing = []
         if not bench.has_gen and any(n in GENERATED for n in names):
-            missing.append("`horizon gen model` (for " + ", ".join(n for n in names if n in GENERATED) + ")")
+            missing.append("`gen model` (for " + ", ".join(n for n in names if n in GENERATED) + ")")
         if not bench.has_distance:
-            missing.append("`horizon mesh distance` (our Hausdorff column)")
+            missing.append("`distance` (our Hausdorff column)")
         if missing:
-            msg = f"{horizon} lacks " + " and ".join(missing)
+            lab = bench.lab
+            msg = (f"{lab} lacks " if lab.is_file() else f"no horizon-lab binary at {lab}, needed for ")
+            msg += " and ".join(missing)
             if not args.allow_missing:
-                raise SystemExit(f"error: {msg}; rebuild it (`cargo build --release -p horizon-server`)")
+                raise SystemExit(f"error: {msg}; build it (`cargo build --release -p horizon-lab`,"
+                                 " after and apart from horizon-server) or pass --lab")
             log(f"warning: {msg}; skipping (--allow-missing)")
             if not bench.has_gen:
                 names = [n for n in names if n not in GENERATED]
 
         result = {"config": {"ratio": RATIO, "runs": args.runs, "samples": args.samples,
                              "models": names, "python": args.python,
-                             "horizon_has_distance": bench.has_distance, "horizon_has_gen": bench.has_gen,
+                             "lab_has_distance": bench.has_distance, "lab_has_gen": bench.has_gen,
                              "shared_instanced_models": {k: {"file": str(v[0].relative_to(ROOT)),
                                                              "max_placements_of_a_mesh": v[1]}
                                                          for k, v in instanced.items()}},
-                  "machine": machine_info(horizon.resolve()), "models": {}}
+                  "machine": machine_info(horizon.resolve(), bench.lab), "models": {}}
         started = time.perf_counter()
         for name in names:
             t = time.perf_counter()

@@ -7,7 +7,8 @@
   4. the manifest names an aggregate for every node of the tree, and every file it names exists.
 
 Usage: check_aggregates.py HORIZON_BINARY VALIDATE_MJS [--dir BUILT_WORLD]
-Without --dir, generates and builds the village world in a temporary folder first.
+Without --dir, generates the village world in a temporary folder with `horizon-lab gen world`
+(the horizon-lab beside HORIZON_BINARY) and builds it with `horizon build` first.
 Prints one line per failed check and a closing 'N passed, M failed' line; exits 1 on failure."""
 import json
 import pathlib
@@ -86,8 +87,13 @@ if __name__ == "__main__":
     horizon, validate_mjs = args[0], pathlib.Path(args[1]).resolve()
     if len(args) == 4 and args[2] == "--dir":
         sys.exit(main(horizon, validate_mjs, pathlib.Path(args[3])))
+    lab = pathlib.Path(horizon).with_name("horizon-lab")
+    if not lab.is_file():
+        sys.exit(f"error: no horizon-lab binary at {lab} (it generates the village); build it with"
+                 " `cargo build --release -p horizon-lab`, after and apart from horizon-server,"
+                 " or pass --dir BUILT_WORLD")
     with tempfile.TemporaryDirectory() as tmp:
         world = pathlib.Path(tmp) / "village"
-        subprocess.run([horizon, "gen", "world", "village", str(world)], check=True)
+        subprocess.run([str(lab), "gen", "world", "village", str(world)], check=True)
         subprocess.run([horizon, "build", str(world)], check=True)
         sys.exit(main(horizon, validate_mjs, world))

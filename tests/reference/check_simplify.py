@@ -1,6 +1,6 @@
 """Reference checks of `horizon simplify` against third-party tools, on small models: bunny,
 SimpleInstancing, NegativeScaleTest, CesiumMilkTruck, and patio-chair and stonehenge from
-`horizon gen model` when the binary has it. Each model is simplified by IAS to ratio 0.2 (the
+`horizon-lab gen model` when the lab binary has it. Each model is simplified by IAS to ratio 0.2 (the
 bunny by QEM too) and each output must:
 
   1. have 0 errors from the Khronos glTF-Validator;
@@ -11,13 +11,15 @@ bunny by QEM too) and each output must:
   4. have a Hausdorff distance to the input (pymeshlab's Metro-style sampler, both directions,
      relative to the input's bounding-box diagonal) at most 1.5x that of fast-simplification
      (agg=7) on the expanded, position-welded input at the same ratio;
-  5. have `horizon mesh distance` agree with pymeshlab within 25% on the same pair, when the
-     binary has that command.
+  5. have `horizon-lab distance` agree with pymeshlab within 25% on the same pair, when the
+     lab binary has that command.
 
 The helpers (expand, weld, pymeshlab_hausdorff, fast_simplify, validate) are also used by
-bench/table3.py.
+lab/bench/table3.py.
 
 Usage: check_simplify.py HORIZON_BINARY VALIDATE_MJS
+The lab binary is the `horizon-lab` beside HORIZON_BINARY (cargo build --release -p horizon-lab,
+after and apart from horizon-server); without it the generated models and check 5 are skipped.
 Prints one line per check and a closing 'N passed, M failed' line; exits 1 on any failure."""
 import json
 import pathlib
@@ -44,7 +46,7 @@ GENERATED_MODELS = ["patio-chair", "stonehenge"]
 
 
 # ---------------------------------------------------------------------------------------------
-# Helpers shared with bench/table3.py
+# Helpers shared with lab/bench/table3.py
 
 def accessor(asset, i):
     """Accessor i as float64 rows (a strided view, so large accessors read fast); normalized
@@ -206,16 +208,27 @@ def write_ply(path, v, f):
         out.write(faces.tobytes())
 
 
-def has_command(horizon, *words):
-    """Whether the binary has the subcommand `words` (its --help exits 0)."""
-    run = subprocess.run([str(horizon), *words, "--help"], capture_output=True, text=True)
+def lab_binary(horizon):
+    """The horizon-lab binary beside the given horizon binary (both are built into one target
+    folder)."""
+    return pathlib.Path(horizon).with_name("horizon-lab")
+
+
+def has_command(binary, *words):
+    """Whether the binary exists and has the subcommand `words` (its --help exits 0)."""
+    try:
+        run = subprocess.run([str(binary), *words, "--help"], capture_output=True, text=True)
+    except OSError:
+        return False
     return run.returncode == 0
 
 
-def horizon_json(horizon, *args):
-    run = subprocess.run([str(horizon), *map(str, args), "--json"], capture_output=True, text=True)
+def horizon_json(binary, *args):
+    """Runs `binary ARGS --json` (horizon or horizon-lab) and returns its last JSON line."""
+    run = subprocess.run([str(binary), *map(str, args), "--json"], capture_output=True, text=True)
     if run.returncode != 0:
-        raise RuntimeError(f"horizon {' '.join(map(str, args))} failed: {run.stderr.strip()[:500]}")
+        raise RuntimeError(f"{pathlib.Path(binary).name} {' '.join(map(str, args))} failed:"
+                           f" {run.stderr.strip()[:500]}")
     return json.loads(run.stdout.strip().splitlines()[-1])
 
 
@@ -241,19 +254,20 @@ def main(horizon, validate_mjs):
     with tempfile.TemporaryDirectory() as tmp:
         tmp = pathlib.Path(tmp)
         models = dict(ASSET_MODELS)
-        if has_command(horizon, "gen", "model"):
+        lab = lab_binary(horizon)
+        if has_command(lab, "gen", "model"):
             for name in GENERATED_MODELS:
                 out = tmp / f"{name}.glb"
-                run = subprocess.run([horizon, "gen", "model", name, str(out), "--seed", "1"],
+                run = subprocess.run([str(lab), "gen", "model", name, str(out), "--seed", "1"],
                                      capture_output=True, text=True)
                 check(f"gen model {name}", run.returncode == 0 and out.exists(), run.stderr.strip()[:300])
                 if out.exists():
                     models[name] = out
         else:
-            note(f"{', '.join(GENERATED_MODELS)}: this horizon has no `gen model`")
-        distance = has_command(horizon, "mesh", "distance")
+            note(f"{', '.join(GENERATED_MODELS)}: no horizon-lab with `gen model` at {lab}")
+        distance = has_command(lab, "distance")
         if not distance:
-            note("`horizon mesh distance` agreement: this horizon has no `mesh distance`")
+            note(f"`horizon-lab distance` agreement: no horizon-lab with `distance` at {lab}")
 
         outputs = []  # (label, path, report, input path, input arrays, fast-simplification error)
         for name, path in models.items():
@@ -301,10 +315,10 @@ def main(horizon, validate_mjs):
                       f"{a:.4g} vs {b:.4g} (fast-simplification kept {len(fs_f)} of {len(f_in)} welded"
                       f" triangles; {method} kept {len(f_out)}) relative to the diagonal")
                 if distance:
-                    d = horizon_json(horizon, "mesh", "distance", str(path), str(out),
+                    d = horizon_json(lab, "distance", str(path), str(out),
                                      "--samples", str(SAMPLES))
                     h = float(d["hausdorff_rel_diag"])
-                    check(f"mesh distance {label} agrees with pymeshlab within 25%",
+                    check(f"distance {label} agrees with pymeshlab within 25%",
                           abs(h - a) <= 0.25 * a + 1e-6,
                           f"horizon {h:.4g}, pymeshlab {a:.4g} relative to the diagonal")
 
