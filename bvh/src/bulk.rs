@@ -18,9 +18,10 @@
 //!   paper's shape-only measure).
 //! - Cost of a plane: `mu * dispersion(L, R) / dispersion(parent) +
 //!   (1 - mu) * (n_L A_L + n_R A_R) / (n A_parent)`, A the surface area of a side's box of
-//!   object spheres. At mu = 1 only the dispersion counts, as in the paper; below 1 the spatial term
-//!   (the SAH) weighs in as the volume term does in eq. 1, and it alone decides when the
-//!   descriptors do not vary across the node (so identical models still split compactly).
+//!   object spheres. At mu = 1 only the dispersion counts, as in the paper; below 1 the
+//!   spatial term (the SAH) weighs in as the volume term does in eq. 1, and it alone decides
+//!   when the descriptors do not vary across the node (so identical models still split
+//!   compactly).
 //! - Branching: a node of `n` objects gets `k` children, about `n / (leaf_size * B^t)` for
 //!   children of height t; the objects are cut in two by the best plane, each side taking a
 //!   share of the `k` children in proportion to its objects, recursively until each share is

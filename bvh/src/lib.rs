@@ -23,7 +23,7 @@
 //! - `spatial.rs` (feature `baseline`, for the lab only): `SpatialBaseline`, the same objects
 //!   in an `obvhs` SAH BVH with the same cut, the query-cost baseline.
 //! - `validate.rs`: [`Bvh::validate`], every structural invariant.
-//! - [`solid_angle`]: eq. 3 and the max-sphere worst case.
+//! - [`solid_angle`](mod@solid_angle): eq. 3 and the max-sphere worst case.
 //! - [`bounds`]: spheres, boxes and the sphere fit.
 //! - [`options`]: [`BvhOptions`] with the documented defaults.
 

@@ -230,7 +230,7 @@ impl Objects {
 ///
 /// # Layout
 /// Nodes live in an arena (`nodes`) indexed by [`NodeId`]; freed slots go on `free_nodes`
-/// and are reused. Per node, beside the hot [`Node`] record:
+/// and are reused. Per node, beside the hot `Node` record:
 /// - `children[id * (max_children + 1)..][..len]`: child node ids (internal node) or object
 ///   ids (leaf). One spare slot holds the overflowing child until the node splits, so no node
 ///   ever allocates.

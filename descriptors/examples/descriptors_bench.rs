@@ -1,4 +1,4 @@
-//! Benchmark of issue 4's descriptor targets, written to bench/results/descriptors.{md,json}:
+//! Benchmark of the descriptors' targets, written to lab/results/descriptors.{md,json}:
 //!
 //! 1. time of the full descriptor (voxelize, Zernike, CSD) per model on one core, median of 5
 //!    runs, including two 20,000-triangle models (village-mesh, textured, and maple-tree,
@@ -162,7 +162,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         median_distinct_z_diff: median,
         invariance,
     };
-    let out = root.join("bench/results");
+    let out = root.join("lab/results");
     std::fs::create_dir_all(&out)?;
     std::fs::write(
         out.join("descriptors.json"),
@@ -192,7 +192,7 @@ fn moved(mesh: &InstancedMesh, rng: &mut Rng) -> InstancedMesh {
 
 fn markdown(r: &Report) -> String {
     let mut s = String::new();
-    let _ = writeln!(s, "# Descriptor benchmark (issue 4)\n");
+    let _ = writeln!(s, "# Descriptor benchmark\n");
     let _ = writeln!(
         s,
         "`cargo run --release -p horizon-descriptors --example descriptors_bench`. One core \

@@ -18,11 +18,11 @@
 //! (Sutherland-Hodgman against axis-aligned planes). Binary occupancy aliases: a surface
 //! occupies |n_x| + |n_y| + |n_z| cells per unit area on average (1 to sqrt(3), by
 //! orientation), and a face parallel to a grid plane occupies one or two layers depending on
-//! its offset, so turning a model reweights its parts. The areas do not depend on the
-//! orientation at all. Measured on the shared models, 20 random rigid motions with uniform
-//! scale each (`tests/zernike.rs`, `compare_voxelization_and_normalisation`), the worst
-//! moved-copy Zernike z_diff relative to the median distinct-model z_diff falls from 0.06-0.48
-//! (binary) to at most 0.013 (area-weighted).
+//! its offset, so turning a model reweights its parts: on the shared models, binary grids let
+//! a rigid motion move the Zernike descriptor by up to about half the median distance between
+//! distinct models. The areas do not depend on the orientation at all; with them the
+//! shared-model invariance test in `tests/zernike.rs` holds (a moved copy stays within a tenth
+//! of that median), and `lab/results/descriptors.md` records the margin.
 //!
 //! The solid fill floods the outside from the grid border through 6-connected empty cells
 //! and marks everything it did not reach; a solid grid is uniform (no weights). A conservative
@@ -150,9 +150,10 @@ pub enum InvalidGrid {
 /// the fly; the expanded mesh is never allocated), with area weights unless disabled.
 ///
 /// The grid is a cube over the world bounds of the usable triangles: its edge is the longest
-/// extent plus [`PADDING_CELLS`] on each side, centred on the bounds. Triangles that are not
-/// finite or have zero area, indices past a vertex array and instances of missing submeshes
-/// are skipped; if nothing is left, the result is [`DescriptorError::Empty`].
+/// extent plus one and a half cells (`PADDING_CELLS`) on each side, centred on the bounds.
+/// Triangles that are not finite or have zero area, indices past a vertex array and instances
+/// of missing submeshes are skipped; if nothing is left, the result is
+/// [`DescriptorError::Empty`].
 pub fn voxelize(
     mesh: &InstancedMesh,
     options: &VoxelizeOptions,

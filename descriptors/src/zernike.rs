@@ -92,14 +92,13 @@ pub struct ZernikeOptions {
 /// `1 - r ~ theta^2 / 8`, so its outermost lobe is `1 - r < 0.007` thick: under half a cell
 /// at the 128^3 grid's scale. The farthest occupied corner is only known to about a cell, so
 /// mapping it to radius 1 both jitters the scale by ~1% and puts the far end of every shape
-/// where the high orders are most sensitive; the RMS radius averages over every cell.
-/// Measured over 20 random rigid motions with uniform scale of each shared model
-/// (area-weighted grids; `compare_voxelization_and_normalisation` in `tests/zernike.rs`), the
-/// worst moved-copy z_diff is 0.02-0.135 of the median distinct-model z_diff with
-/// [`ScaleNormalisation::FarthestCorner`] (BoxTextured fails the 0.1 target), against at most
-/// 0.013 with the RMS radius at 0.4 (0.044 at 0.5). Novotni and Klein's own code also scales
-/// by the RMS radius (to 0.5, cutting off whatever falls outside the ball); the cap here never
-/// cuts anything off.
+/// where the high orders are most sensitive; the RMS radius averages over every cell. Under
+/// rigid motions with uniform scale of the shared models,
+/// [`ScaleNormalisation::FarthestCorner`] lets BoxTextured's moved copies drift past a tenth
+/// of the median distance between distinct models (the bound `tests/zernike.rs` asserts),
+/// while the RMS radius keeps every model well inside it, more so at 0.4 than at 0.5. Novotni
+/// and Klein's own code also scales by the RMS radius (to 0.5, cutting off whatever falls
+/// outside the ball); the cap here never cuts anything off.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum ScaleNormalisation {
     /// The farthest corner of an occupied cube lands on radius 1.

@@ -7,7 +7,7 @@
 //! - rigid motions with uniform scale barely move the descriptor, for generated shapes
 //!   (proptest) and for every shared model, relative to the spread between distinct models.
 //!
-//! The shared-model invariance test runs the full 20 motions per model in release
+//! The shared-model invariance test runs 20 motions per model in release
 //! (`cargo test --release`) and 3 per model in debug builds, where the crate itself is
 //! unoptimised (the proptest likewise runs 16 or 3 cases); the assertions are the same in
 //! both. Two ignored tests print measurements: `compare_voxelization_and_normalisation` (the
@@ -674,9 +674,9 @@ fn bunny_block_distance() -> f64 {
 
 #[test]
 fn shared_models_are_invariant_relative_to_their_spread() {
-    // The target: over 20 random rigid motions with uniform scale of each shared
-    // model, z_diff between the model and its moved copy stays at most 10% of the median
-    // z_diff between distinct shared models. Debug builds try 3 motions per model.
+    // The descriptors' invariance target: over 20 random rigid motions with uniform scale of
+    // each shared model, z_diff between the model and its moved copy stays at most 10% of the
+    // median z_diff between distinct shared models. Debug builds try 3 motions per model.
     let motions = if cfg!(debug_assertions) { 3 } else { 20 };
     let mut described = Vec::new();
     for name in SHARED_MODELS {

@@ -1,5 +1,5 @@
-//! Throughput of the QEM baseline on the expanded maple-tree (issue 3's Table 3 target), with
-//! the bunny and IAS on maple-tree as guards:
+//! Throughput of the QEM baseline on the expanded maple-tree (the IAS paper's Table 3 case),
+//! with the bunny and IAS on maple-tree as guards:
 //! `cargo run --release -p horizon-simplify --example qem_throughput -- [RUNS] [--error] [--dump DIR]
 //! [--maple-only]`.
 //!

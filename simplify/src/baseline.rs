@@ -11,8 +11,9 @@ use crate::options::{SimplifyReport, Target};
 use crate::weld::Welder;
 use crate::{Simplified, SimplifyError};
 
-/// meshoptimizer on the expanded, position-welded mesh (timed: the simplification call only), asked for `target` triangles with no
-/// error bound (it may still stop above the target where its topology rules forbid more).
+/// meshoptimizer on the expanded, position-welded mesh (timed: the simplification call only),
+/// asked for `target` triangles with no error bound (it may still stop above the target where
+/// its topology rules forbid more).
 pub fn simplify_meshopt(mesh: &InstancedMesh, target: Target) -> Result<Simplified, SimplifyError> {
     let triangles_target = crate::checked_target(mesh, target)?;
     let triangles_in = mesh.expanded_triangle_count();

@@ -17,8 +17,9 @@
 //! order visits the mesh at random. So what one step reads sits together: a vertex's quadric,
 //! position, flags, scratch mark and adjacency range in two aligned cache lines (`Vert`), a
 //! triangle's wedges and position vertices in one 32-byte record (`Tri`), and the stale queue
-//! entries (an endpoint changed since the push, about 7 in 8 of them) are dropped in bulk when
-//! the radix heap redistributes a bucket, where their stamp checks overlap in memory.
+//! entries (an endpoint changed since the push: most of them, since every collapse queues its
+//! neighbourhood's edges again and leaves the old entries behind) are dropped in bulk when the
+//! radix heap redistributes a bucket, where their stamp checks overlap in memory.
 
 use glam::{DVec3, Vec2, Vec3, Vec4};
 use horizon_mesh::{InstancedMesh, Submesh};

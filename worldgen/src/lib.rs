@@ -21,7 +21,8 @@
 //! - [`assembly`]: collects textures, materials, submeshes and instances into a model.
 //! - [`worlds`]: the benchmark worlds (village, island, city, city9) built from small parametric
 //!   models; [`generate_world`].
-//! - [`noise`] and [`rng`]: the seeded value noise and SplitMix64 generator everything draws from.
+//! - [`noise`] and [`rng`]: the seeded value noise, and the workspace's SplitMix64 generator
+//!   (re-exported from `horizon_mesh::rng`), that everything draws from.
 
 pub mod assembly;
 pub mod models;

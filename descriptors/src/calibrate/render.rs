@@ -5,9 +5,10 @@
 //! Each model is first put in a frame: area-weighted centroid at the origin and bounding sphere
 //! of radius 1, with either its own axes ([`CanonicalFrame::unrotated`], what the calibration
 //! uses: a model and its variants share their base's frame) or its principal axes
-//! ([`CanonicalFrame::of`], the frame deduplication aligns distinct models in). The views are orthographic along the axes, with the unit disk
-//! filling the image, a z-buffer, base colour x texture x vertex colour, and a two-sided
-//! headlight so shape shows in the image, not only silhouette.
+//! ([`CanonicalFrame::of`], the frame deduplication aligns distinct models in). The views are
+//! orthographic along the axes, with the unit disk filling the image, a z-buffer, base colour
+//! x texture x vertex colour, and a two-sided headlight so shape shows in the image, not only
+//! silhouette.
 
 use glam::{Mat3, Vec2, Vec3, Vec4};
 use horizon_mesh::{InstancedMesh, Wrap};

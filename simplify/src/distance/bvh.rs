@@ -1,11 +1,12 @@
 //! A binary bounding-volume hierarchy over triangles for exact closest-point queries.
 //!
-//! Built top-down with binned SAH (16 bins along the widest centroid axis; Wald 2007, "On fast construction of
-//! SAH-based bounding volume hierarchies"), falling back to an object-median split when SAH
-//! cannot separate the centroids or the tree gets deep, so depth stays O(log n). Subtrees above
-//! [`PARALLEL_BUILD`] triangles are built in parallel. Nodes are stored depth-first: an internal
-//! node's left child follows it, its right child is at `first`. The query visits the nearer child
-//! first and prunes every box farther than the best distance found so far.
+//! Built top-down with binned SAH (16 bins along the widest centroid axis; Wald 2007, "On fast
+//! construction of SAH-based bounding volume hierarchies"), falling back to an object-median
+//! split when SAH cannot separate the centroids or the tree gets deep, so depth stays
+//! O(log n). Subtrees above [`PARALLEL_BUILD`] triangles are built in parallel. Nodes are
+//! stored depth-first: an internal node's left child follows it, its right child is at
+//! `first`. The query visits the nearer child first and prunes every box farther than the best
+//! distance found so far.
 
 use glam::{DVec3, Vec3};
 use horizon_mesh::Aabb;

@@ -13,13 +13,11 @@
 //! cache while it runs. The first sweep is the largest, and most of the work: there a pilot
 //! group in [`PILOT_STRIDE`] sweeps alone, in small steps, until its removals, scaled up,
 //! promise [`MAIN_SHARE`] of the excess; then every other group runs straight to the pilots'
-//! key, each visited once while its piece is in cache (on the expanded maple the estimate was
-//! within 1% of the removals, and the QEM baseline 17% faster than with ordinary sweeps
-//! only). In fact any schedule of keys reaches the single queue's state, so long as every
-//! group ends at the same key. The ordinary sweeps that follow each aim to remove [`SHARE`] of
-//! the triangles still over the target, choosing θ from a sample of the queued keys. Once
-//! little is left, the pieces' queues pour into the single queue, which finishes the run in
-//! strict order.
+//! key, each visited once while its piece is in cache. Any schedule of keys reaches the single
+//! queue's state, so long as every group ends at the same key. The ordinary sweeps that follow
+//! each aim to remove [`SHARE`] of the triangles still over the target, choosing θ from a
+//! sample of the queued keys. Once little is left, the pieces' queues pour into the single
+//! queue, which finishes the run in strict order.
 //!
 //! Pieces are also independent in memory, so on a large mesh the sweeps run in parallel, one
 //! part of the workspace (whole pieces, see [`super::workspace`]) per thread. A group's sweep

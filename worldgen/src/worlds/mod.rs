@@ -1,4 +1,4 @@
-//! The seeded benchmark worlds of the core paper (Azim et al. 2014, section 8; issue 5):
+//! The seeded benchmark worlds of the core paper (Azim et al. 2014, section 8):
 //! `village` (6 unique models, 10,000 objects), `island` (236 unique models, 2,362 objects),
 //! `city` (60,000 objects on a street grid, about two thousand distinct house and ground models
 //! with as many 32×32 textures, 3% of the objects replaced by user models) and `city9` (9
