@@ -3,9 +3,8 @@
 //!
 //! IAS (core paper section 6) stops where no collapse is legal: a closed part never goes
 //! below a tetrahedron's 4 triangles, however far away. An upper aggregate is made of hundreds
-//! of thousands of such parts (the city's root: 307,775 instances, 1.49M triangles against a
-//! budget of 129,600, 13.9 MB), so simplification alone leaves it an order of magnitude over
-//! the budget that its screen size (`budget.rs`) allows. This stage then drops whole
+//! of thousands of such parts, so simplification alone can leave it an order of magnitude
+//! over the budget that its screen size (`budget.rs`) allows. This stage then drops whole
 //! instances, smallest on screen first, until the aggregate fits: the detail that vanishes is
 //! the detail least visible from the aggregate's nearest display distance, and the largest
 //! footprint dropped is reported as the stage's error, in pixels.

@@ -408,8 +408,8 @@ pub fn generate_with(
 /// How far, in pixels as near as the aggregate's geometry can be shown
 /// (`Display::nearest_length_of_pixels`), storing its positions as 16-bit integers may move a
 /// vertex (`ExportOptions::position_tolerance`). An eighth of a pixel is under the 8-bit
-/// normals' shading change and far under IAS's own error (median 0.66 px on the village,
-/// `budget.rs`); a run it refuses keeps float positions.
+/// normals' shading change and far under IAS's own error at the default budget (`budget.rs`,
+/// `lab/results/budget_village.md`); a run it refuses keeps float positions.
 pub const POSITION_PIXELS: f64 = 0.125;
 
 /// Encodes the aggregate and fills in its counts.

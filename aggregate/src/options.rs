@@ -51,8 +51,8 @@ pub struct AggregateOptions {
     pub atlas_bytes: usize,
     /// Atlas texels per pixel the aggregate covers at its nearest display distance. Default
     /// 0.25 (one texel per 2 x 2 pixels): an aggregate stands for objects each under
-    /// `min_solid_angle`, and at one texel per pixel its atlas was most of the city's join
-    /// download.
+    /// `min_solid_angle`, and at one texel per pixel its atlas would be most of what a client
+    /// downloads for it.
     pub texels_per_pixel: f64,
     /// Optimised pipeline or the unoptimised baseline.
     pub method: Method,
