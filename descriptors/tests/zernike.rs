@@ -7,11 +7,9 @@
 //! - rigid motions with uniform scale barely move the descriptor, for generated shapes
 //!   (proptest) and for every shared model, relative to the spread between distinct models.
 //!
-//! The shared-model invariance test runs 20 motions per model in release
-//! (`cargo test --release`) and 3 per model in debug builds, where the crate itself is
-//! unoptimised (the proptest likewise runs 16 or 3 cases); the assertions are the same in
-//! both. Two ignored tests print measurements: `compare_voxelization_and_normalisation` (the
-//! table behind the defaults) and `timings`.
+//! The shared-model invariance test runs 20 motions per model in release (`cargo test
+//! --release`) and 3 per model in debug builds, where the crate itself is unoptimised (the
+//! proptest likewise runs 16 or 3 cases); the assertions are the same in both.
 
 use std::f64::consts::PI;
 use std::path::PathBuf;
@@ -724,87 +722,4 @@ fn shared_models_are_invariant_relative_to_their_spread() {
         failures.is_empty(),
         "moved copies beyond 10% of the median distinct z_diff: {failures:?}"
     );
-}
-
-/// The comparison behind the defaults: the shared-model invariance ratio (worst moved-copy
-/// z_diff over the median distinct z_diff, 20 motions) for each cell shape and scale
-/// normalisation. Run with `cargo test --release -- --ignored --nocapture compare`.
-#[test]
-#[ignore]
-fn compare_voxelization_and_normalisation() {
-    use horizon_descriptors::zernike::{zernike_with, ScaleNormalisation, ZernikeOptions};
-    let meshes: Vec<_> = SHARED_MODELS.iter().map(|n| load(n)).collect();
-    let block = single(boxed(Vec3::ZERO, Vec3::new(2.0, 1.0, 0.5), 3));
-    for area_weights in [false, true] {
-        for scale in [
-            ScaleNormalisation::FarthestCorner,
-            ScaleNormalisation::RmsRadius(0.5),
-            ScaleNormalisation::RmsRadius(0.4),
-        ] {
-            let vo = VoxelizeOptions {
-                area_weights,
-                ..VoxelizeOptions::default()
-            };
-            let zo = ZernikeOptions { scale };
-            let d = |m: &InstancedMesh| {
-                zernike_with(&voxel::voxelize(m, &vo).expect("voxelize"), &zo).expect("zernike")
-            };
-            let base: Vec<_> = meshes.iter().map(d).collect();
-            let mut distinct = Vec::new();
-            for i in 0..base.len() {
-                for j in i + 1..base.len() {
-                    distinct.push(z_diff(&base[i], &base[j]));
-                }
-            }
-            let med = median(distinct);
-            let mut rng = Rng::new(0x5EED_0004);
-            let mut line =
-                format!("area weights {area_weights}, {scale:?}: median {med:.3}, ratios");
-            for (k, m) in meshes.iter().enumerate() {
-                let mut worst: f64 = 0.0;
-                for _ in 0..20 {
-                    worst = worst.max(z_diff(&base[k], &d(&moved(m, random_motion(&mut rng)))));
-                }
-                line += &format!(" {:.3}", worst / med);
-            }
-            let block_d = d(&block);
-            let mut worst: f64 = 0.0;
-            for _ in 0..20 {
-                worst = worst.max(z_diff(
-                    &block_d,
-                    &d(&moved(&block, random_motion(&mut rng))),
-                ));
-            }
-            line += &format!("; 2x1x0.5 box {:.3}", worst / med);
-            eprintln!("{line}");
-        }
-    }
-}
-
-/// Release timings of voxelize + Zernike on one thread: the best and the median of 10 runs
-/// per model. Run with `RAYON_NUM_THREADS=1 cargo test --release -- --ignored --nocapture
-/// timings`.
-#[test]
-#[ignore]
-fn timings() {
-    for name in SHARED_MODELS {
-        let mesh = load(name);
-        let mut runs = Vec::new();
-        for _ in 0..10 {
-            let started = Instant::now();
-            let grid = voxel::voxelize(&mesh, &VoxelizeOptions::default()).expect("voxelize");
-            let voxelized = started.elapsed().as_secs_f64() * 1e3;
-            zernike::zernike(&grid).expect("zernike");
-            let total = started.elapsed().as_secs_f64() * 1e3;
-            runs.push((total, voxelized));
-        }
-        runs.sort_by(|a, b| a.0.total_cmp(&b.0));
-        eprintln!(
-            "{name}: {} triangles, best {:.1} ms (voxelize {:.1}), median {:.1} ms",
-            mesh.expanded_triangle_count(),
-            runs[0].0,
-            runs[0].1,
-            runs[5].0
-        );
-    }
 }
