@@ -283,7 +283,7 @@ pub fn run(
         (
             Table1 {
                 source: format!(
-                    "derived by `horizon calibrate` over {} models, SSIM >= {threshold}",
+                    "derived by `horizon-lab calibrate` over {} models, SSIM >= {threshold}",
                     models.len()
                 ),
                 rows,
@@ -305,7 +305,7 @@ pub fn run(
             pairs: pairs.len(),
             coverage,
             sensitivity,
-            command: "horizon calibrate --out descriptors/data".into(),
+            command: "horizon-lab calibrate --out descriptors/data".into(),
         },
         names: models.iter().map(|m| m.name.clone()).collect(),
         pairs,
