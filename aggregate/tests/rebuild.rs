@@ -446,9 +446,7 @@ fn a_partial_build_builds_the_named_subtrees_only() {
     let w = world();
     let bvh = tree(&w);
     let (sa, sb) = (MemoryStore::new(), MemoryStore::new());
-    build_aggregates(&bvh, &w.models, &sa, &options(&w), &|_| {})
-        .expect("whole build")
-        .report;
+    build_aggregates(&bvh, &w.models, &sa, &options(&w), &|_| {}).expect("whole build");
     let whole = sa.manifest().expect("read").expect("manifest");
     let root = bvh.node(bvh.root()).expect("root");
     let pick = root.child_nodes().next().expect("a child of the root");
@@ -490,9 +488,7 @@ fn a_parent_built_over_reused_children_equals_one_built_with_them() {
         },
     );
     let (sa, sb) = (MemoryStore::new(), MemoryStore::new());
-    build_aggregates(&bvh, &w.models, &sa, &options(&w), &|_| {})
-        .expect("whole build")
-        .report;
+    build_aggregates(&bvh, &w.models, &sa, &options(&w), &|_| {}).expect("whole build");
     let whole = sa.manifest().expect("read").expect("manifest");
     // Store b holds every aggregate but the root's, then builds the whole tree over them.
     assert!(bvh.node(bvh.root()).expect("root").child_nodes().count() >= 2);

@@ -9,13 +9,15 @@
 //! - `report.rs`: `report`, the join download against naive and unoptimised aggregates;
 //!   `measuring.rs`: the store the unoptimised baseline is built into.
 //! - `sweep.rs`: `sweep`, Figure 5.
-//! - `bench_bvh.rs`: `bench-bvh`; `bench_aggregates.rs`: `bench-aggregates`.
+//! - `bench_bvh.rs`: `bench-bvh`; `bench_aggregates.rs`: `bench-aggregates`;
+//!   `bench_descriptors.rs`: `bench-descriptors`.
 //! - `calibrate.rs`: `calibrate`, Table 1.
 //! - `distance.rs`: `distance`, the Hausdorff yardstick.
 //! - `views.rs`: the seeded viewpoints they share.
 
 mod bench_aggregates;
 mod bench_bvh;
+mod bench_descriptors;
 mod calibrate;
 mod distance;
 mod gen;
@@ -133,6 +135,16 @@ enum Command {
         /// The markdown report (default: lab/results/aggregates_<world name>.md).
         #[arg(long)]
         out: Option<PathBuf>,
+    },
+    /// The descriptors' targets: time per model on one core, batch speed-up, invariance to
+    /// rigid motions, hostile UVs. Writes lab/results/descriptors.{md,json}.
+    BenchDescriptors {
+        /// Folder holding the shared models (assets/models of the repository).
+        #[arg(long, default_value = "assets/models")]
+        assets: PathBuf,
+        /// Folder to write descriptors.md and descriptors.json into.
+        #[arg(long, default_value = RESULTS)]
+        out: PathBuf,
     },
     /// Derives Table 1's deduplication thresholds by the paper's procedure (renders from three
     /// directions, SSIM, every pair of models and perturbed variants) and writes table1.json
@@ -258,6 +270,7 @@ fn main() -> ExitCode {
             seed,
             out,
         } => bench_aggregates::run(&dir, insert, seed, out.as_deref()),
+        Command::BenchDescriptors { assets, out } => bench_descriptors::run(&assets, &out),
         Command::Calibrate {
             out,
             assets,

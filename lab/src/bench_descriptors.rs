@@ -1,24 +1,32 @@
-//! Benchmark of the descriptors' targets, written to lab/results/descriptors.{md,json}:
+//! `horizon-lab bench-descriptors`: the descriptors' targets, written to
+//! `lab/results/descriptors.{md,json}`:
 //!
 //! 1. time of the full descriptor (voxelize, Zernike, CSD) per model on one core, median of 5
 //!    runs, including two 20,000-triangle models (village-mesh, textured, and maple-tree,
 //!    simplified by IAS to 20k expanded triangles);
 //! 2. a batch of all models on one thread and in parallel with rayon (every core);
 //! 3. invariance: for each shared model, the largest z_diff to 20 seeded random rigid motions
-//!    with uniform scale, divided by the median z_diff between distinct shared models.
-//!
-//! Run: `cargo run --release -p horizon-descriptors --example descriptors_bench`
-//! (from the repository root).
+//!    with uniform scale, divided by the median z_diff between distinct shared models;
+//! 4. hostile UVs: the Color Structure Descriptor of a textured square whose UVs lie far beyond
+//!    any texture (1e30), span two million repeats, or reach f32's largest values, under every
+//!    wrap mode, against a bound of 5 s each (charts cap their repeats, so it stays small).
 
 use std::fmt::Write as _;
+use std::io::Cursor;
 use std::path::Path;
 use std::time::Instant;
 
-use glam::{Affine3A, Quat, Vec3};
+use glam::{Affine3A, Quat, Vec2, Vec3};
+use horizon_descriptors::csd::{color_structure, CsdOptions};
 use horizon_descriptors::{describe, describe_batch, z_diff, DescriptorOptions, Descriptors};
 use horizon_mesh::rng::Rng;
-use horizon_mesh::{import_file, ImportOptions, InstancedMesh};
+use horizon_mesh::{
+    import_file, ImportOptions, Instance, InstancedMesh, Material, Submesh, Texture, TextureRef,
+    Wrap,
+};
+use horizon_server::outln;
 use horizon_simplify::{simplify, SimplifyOptions, Target};
+use horizon_world::write_atomically;
 use serde::Serialize;
 
 const SHARED: &[&str] = &[
@@ -33,6 +41,8 @@ const SHARED: &[&str] = &[
 ];
 const RUNS: usize = 5;
 const MOTIONS: usize = 20;
+/// The bound on one hostile-UV descriptor.
+const HOSTILE_UV_SECONDS: f64 = 5.0;
 
 #[derive(Serialize)]
 struct TimingRow {
@@ -53,6 +63,14 @@ struct InvarianceRow {
 }
 
 #[derive(Serialize)]
+struct HostileUvRow {
+    uv_min: [f32; 2],
+    uv_max: [f32; 2],
+    wrap: String,
+    seconds: f64,
+}
+
+#[derive(Serialize)]
 struct Report {
     timings: Vec<TimingRow>,
     batch_models: usize,
@@ -61,17 +79,14 @@ struct Report {
     batch_threads: usize,
     median_distinct_z_diff: f32,
     invariance: Vec<InvarianceRow>,
+    hostile_uvs: Vec<HostileUvRow>,
 }
 
-fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+/// Runs the benchmark on the models under `assets` and writes the report into `out`.
+pub fn run(assets: &Path, out: &Path) -> anyhow::Result<()> {
     let mut models: Vec<(String, InstancedMesh)> = Vec::new();
     for rel in SHARED {
-        let mesh = import_file(
-            &root.join("assets/models").join(rel),
-            &ImportOptions::default(),
-        )?
-        .mesh;
+        let mesh = import_file(&assets.join(rel), &ImportOptions::default())?.mesh;
         models.push((rel.split('/').next().unwrap_or(rel).to_string(), mesh));
     }
     // 20,000-triangle models: generated Table 2 models simplified by IAS to 20k expanded
@@ -153,6 +168,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         });
     }
 
+    // 4. Hostile UVs, one core.
+    let hostile_uvs = one.install(hostile_uvs)?;
+
     let report = Report {
         timings,
         batch_models: meshes.len(),
@@ -161,17 +179,76 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         batch_threads: rayon::current_num_threads(),
         median_distinct_z_diff: median,
         invariance,
+        hostile_uvs,
     };
-    let out = root.join("lab/results");
-    std::fs::create_dir_all(&out)?;
-    std::fs::write(
-        out.join("descriptors.json"),
-        serde_json::to_string_pretty(&report)?,
+    write_atomically(
+        &out.join("descriptors.json"),
+        serde_json::to_string_pretty(&report)?.as_bytes(),
     )?;
     let md = markdown(&report);
-    std::fs::write(out.join("descriptors.md"), &md)?;
-    print!("{md}");
+    write_atomically(&out.join("descriptors.md"), md.as_bytes())?;
+    outln!("{}", md.trim_end())?;
     Ok(())
+}
+
+/// The CSD of a unit square with a red and blue texture, its UVs over each hostile range,
+/// under each wrap mode, timed.
+fn hostile_uvs() -> anyhow::Result<Vec<HostileUvRow>> {
+    let mut image = image::RgbaImage::new(32, 32);
+    for (x, _, p) in image.enumerate_pixels_mut() {
+        *p = if x < 16 {
+            image::Rgba([220, 30, 30, 255])
+        } else {
+            image::Rgba([30, 30, 220, 255])
+        };
+    }
+    let mut png = Vec::new();
+    image.write_to(&mut Cursor::new(&mut png), image::ImageFormat::Png)?;
+    let mut rows = Vec::new();
+    for (lo, hi) in [
+        (Vec2::splat(1e30), Vec2::splat(1e30 + 1e24)),
+        (Vec2::splat(-1e6), Vec2::splat(1e6)),
+        (Vec2::new(0.0, 0.0), Vec2::new(3.0e38, 1.0)),
+    ] {
+        for wrap in [Wrap::Repeat, Wrap::MirroredRepeat, Wrap::ClampToEdge] {
+            let mesh = InstancedMesh {
+                submeshes: vec![Submesh {
+                    positions: vec![Vec3::ZERO, Vec3::X, Vec3::new(1.0, 1.0, 0.0), Vec3::Y],
+                    uvs: Some(vec![lo, Vec2::new(hi.x, lo.y), hi, Vec2::new(lo.x, hi.y)]),
+                    indices: vec![0, 1, 2, 0, 2, 3],
+                    material: Some(0),
+                    ..Submesh::default()
+                }],
+                instances: vec![Instance {
+                    submesh: 0,
+                    transform: Affine3A::IDENTITY,
+                }],
+                materials: vec![Material {
+                    base_color_texture: Some(TextureRef {
+                        texture: 0,
+                        transform: None,
+                    }),
+                    ..Material::default()
+                }],
+                textures: vec![Texture {
+                    bytes: png.clone(),
+                    mime_type: "image/png".into(),
+                    size: (32, 32),
+                    wrap_u: wrap,
+                    wrap_v: wrap,
+                }],
+            };
+            let started = Instant::now();
+            color_structure(&mesh, &CsdOptions::default())?;
+            rows.push(HostileUvRow {
+                uv_min: lo.to_array(),
+                uv_max: hi.to_array(),
+                wrap: format!("{wrap:?}"),
+                seconds: started.elapsed().as_secs_f64(),
+            });
+        }
+    }
+    Ok(rows)
 }
 
 /// The model under a seeded random rotation, uniform scale in [0.1, 10] and translation.
@@ -195,7 +272,7 @@ fn markdown(r: &Report) -> String {
     let _ = writeln!(s, "# Descriptor benchmark\n");
     let _ = writeln!(
         s,
-        "`cargo run --release -p horizon-descriptors --example descriptors_bench`. One core \
+        "`horizon-lab bench-descriptors`. One core \
          (a one-thread rayon pool), median of {RUNS} runs; the target is 150 ms for a \
          20k-triangle model. The generated models are simplified by IAS towards 20,000 \
          expanded triangles; village-mesh stops near 84k, the floor of its closed parts \
@@ -238,6 +315,28 @@ fn markdown(r: &Report) -> String {
             i.max_moved_z_diff,
             i.ratio_to_median_distinct * 100.0,
             if i.ratio_to_median_distinct <= 0.1 {
+                "yes"
+            } else {
+                "NO"
+            }
+        );
+    }
+    let _ = writeln!(
+        s,
+        "\nHostile UVs: the CSD of a textured square, one core; bound {HOSTILE_UV_SECONDS} s \
+         each.\n"
+    );
+    let _ = writeln!(s, "| UVs from | to | wrap | seconds | within bound |");
+    let _ = writeln!(s, "|---|---|---|---|---|");
+    for h in &r.hostile_uvs {
+        let _ = writeln!(
+            s,
+            "| {:?} | {:?} | {} | {:.4} | {} |",
+            h.uv_min,
+            h.uv_max,
+            h.wrap,
+            h.seconds,
+            if h.seconds <= HOSTILE_UV_SECONDS {
                 "yes"
             } else {
                 "NO"
