@@ -46,10 +46,12 @@ step "cargo test"
 cargo test --workspace --quiet
 
 step "reference checks (Khronos glTF-Validator, trimesh)"
-# Built one after the other, not together: built together, the lab's baseline features would
-# be unified into the product binary under test.
+# The product under test is the release horizon, built alone so that it is exactly what ships
+# (built together with the lab, cargo would unify the lab's baseline features into it). The lab
+# commands the checks use (gen model, gen world, distance on small models) take the debug
+# horizon-lab that cargo test built.
 cargo build --release --quiet -p horizon-server
-cargo build --release --quiet -p horizon-lab
+export HORIZON_LAB=target/debug/horizon-lab
 GLTF_VALIDATOR_DIR="$tools/npm" "$tools/venv/bin/python" tests/reference/check_models.py \
   target/release/horizon tests/reference/validate.mjs
 GLTF_VALIDATOR_DIR="$tools/npm" "$tools/venv/bin/python" tests/reference/check_simplify.py \

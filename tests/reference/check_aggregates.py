@@ -1,4 +1,4 @@
-"""Reference checks of the aggregates `horizon build` writes (issue 6), with third-party tools:
+"""Reference checks of the aggregates `horizon build` writes, with third-party tools:
 
   1. the Khronos glTF-Validator reports 0 errors for every aggregate GLB;
   2. trimesh loads every aggregate, with at least one triangle;
@@ -8,7 +8,8 @@
 
 Usage: check_aggregates.py HORIZON_BINARY VALIDATE_MJS [--dir BUILT_WORLD]
 Without --dir, generates the village world in a temporary folder with `horizon-lab gen world`
-(the horizon-lab beside HORIZON_BINARY) and builds it with `horizon build` first.
+($HORIZON_LAB, else the horizon-lab beside HORIZON_BINARY) and builds it with `horizon build`
+first.
 Prints one line per failed check and a closing 'N passed, M failed' line; exits 1 on failure."""
 import json
 import pathlib
@@ -20,6 +21,7 @@ import tempfile
 import trimesh
 
 import gltf_reference as ref
+from check_simplify import lab_binary
 
 
 def glb_json(path):
@@ -87,7 +89,7 @@ if __name__ == "__main__":
     horizon, validate_mjs = args[0], pathlib.Path(args[1]).resolve()
     if len(args) == 4 and args[2] == "--dir":
         sys.exit(main(horizon, validate_mjs, pathlib.Path(args[3])))
-    lab = pathlib.Path(horizon).with_name("horizon-lab")
+    lab = lab_binary(horizon)
     if not lab.is_file():
         sys.exit(f"error: no horizon-lab binary at {lab} (it generates the village); build it with"
                  " `cargo build --release -p horizon-lab`, after and apart from horizon-server,"

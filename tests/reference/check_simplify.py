@@ -18,10 +18,12 @@ The helpers (expand, weld, pymeshlab_hausdorff, fast_simplify, validate) are als
 lab/bench/table3.py.
 
 Usage: check_simplify.py HORIZON_BINARY VALIDATE_MJS
-The lab binary is the `horizon-lab` beside HORIZON_BINARY (cargo build --release -p horizon-lab,
-after and apart from horizon-server); without it the generated models and check 5 are skipped.
+The lab binary is $HORIZON_LAB, else the `horizon-lab` beside HORIZON_BINARY (cargo build
+--release -p horizon-lab, after and apart from horizon-server); without it the generated models
+and check 5 are skipped.
 Prints one line per check and a closing 'N passed, M failed' line; exits 1 on any failure."""
 import json
+import os
 import pathlib
 import subprocess
 import sys
@@ -209,9 +211,10 @@ def write_ply(path, v, f):
 
 
 def lab_binary(horizon):
-    """The horizon-lab binary beside the given horizon binary (both are built into one target
-    folder)."""
-    return pathlib.Path(horizon).with_name("horizon-lab")
+    """The horizon-lab binary: $HORIZON_LAB if set, else the one beside the given horizon
+    binary (both are built into one target folder)."""
+    override = os.environ.get("HORIZON_LAB")
+    return pathlib.Path(override) if override else pathlib.Path(horizon).with_name("horizon-lab")
 
 
 def has_command(binary, *words):
