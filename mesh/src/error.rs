@@ -127,6 +127,14 @@ impl ImportError {
             Self::Invalid(_) => "invalid_mesh",
         }
     }
+
+    /// Which limit was exceeded, for a [`ImportError::LimitExceeded`].
+    pub fn limit(&self) -> Option<crate::import::Limit> {
+        match self {
+            Self::LimitExceeded { what, .. } => Some(crate::import::Limit::of(what)),
+            _ => None,
+        }
+    }
 }
 
 /// Why an export failed.

@@ -24,7 +24,9 @@ pub mod transform;
 
 pub use error::{ExportError, ImportError};
 pub use export::{export_glb, ExportOptions};
-pub use import::{import_bytes, import_file, Format, ImageCheck, ImportOptions, Imported, Limits};
+pub use import::{
+    import_bytes, import_file, Format, ImageCheck, ImportOptions, Imported, Limit, Limits,
+};
 pub use model::{
     Aabb, AlphaMode, ExpandedMesh, Instance, InstancedMesh, InvalidMesh, Material, Submesh,
     Texture, TextureRef, UvTransform, Wrap,

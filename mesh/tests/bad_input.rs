@@ -4,7 +4,7 @@
 mod common;
 
 use common::{f32_bytes, glb, Fixture};
-use horizon_mesh::{import_bytes, import_file, Format, ImportError, ImportOptions, Limits};
+use horizon_mesh::{import_bytes, import_file, Format, ImportError, ImportOptions, Limit, Limits};
 use serde_json::json;
 
 fn kind(result: Result<horizon_mesh::Imported, ImportError>) -> &'static str {
@@ -292,16 +292,32 @@ fn every_limit_is_enforced() {
         }
     };
     let bytes = with_image(&png(16, 16), "image/png").glb();
-    let run = |o: ImportOptions| kind(import_bytes(&bytes, Format::Glb, None, &o));
-    assert_eq!(run(strict(|l| l.max_bytes = 100)), "limit_exceeded");
-    assert_eq!(run(strict(|l| l.max_triangles = 0)), "limit_exceeded");
-    assert_eq!(run(strict(|l| l.max_instances = 0)), "limit_exceeded");
-    assert_eq!(run(strict(|l| l.max_textures = 0)), "limit_exceeded");
+    let import = |o: ImportOptions| import_bytes(&bytes, Format::Glb, None, &o);
+    let limit = |o: ImportOptions| import(o).err().and_then(|e| e.limit());
+    assert_eq!(limit(strict(|l| l.max_bytes = 100)), Some(Limit::Bytes));
     assert_eq!(
-        run(strict(|l| l.max_texture_pixels = 255)),
+        limit(strict(|l| l.max_triangles = 0)),
+        Some(Limit::Triangles)
+    );
+    assert_eq!(
+        limit(strict(|l| l.max_instances = 0)),
+        Some(Limit::Instances)
+    );
+    assert_eq!(limit(strict(|l| l.max_textures = 0)), Some(Limit::Textures));
+    assert_eq!(
+        limit(strict(|l| l.max_texture_pixels = 255)),
+        Some(Limit::Textures)
+    );
+    assert_eq!(
+        limit(strict(|l| l.max_texture_side = 15)),
+        Some(Limit::Textures)
+    );
+    assert_eq!(
+        kind(import(strict(|l| l.max_texture_side = 15))),
         "limit_exceeded"
     );
-    // At exactly the sizes of this file every limit passes: 1 triangle, 1 instance, 256 px.
+    // At exactly the sizes of this file every limit passes: 1 triangle, 1 instance, 256 px,
+    // 16 px a side.
     let exact = ImportOptions {
         limits: Limits {
             max_bytes: bytes.len() as u64,
@@ -309,10 +325,11 @@ fn every_limit_is_enforced() {
             max_instances: 1,
             max_textures: 1,
             max_texture_pixels: 256,
+            max_texture_side: 16,
         },
         ..Default::default()
     };
-    assert_eq!(run(exact), "accepted");
+    assert_eq!(kind(import(exact)), "accepted");
 }
 
 #[test]

@@ -24,7 +24,9 @@ use gltf::json::Root;
 use serde::Deserialize;
 
 use super::buffers::{missing, read_floats, read_indices, AccessorValues, BinaryData};
-use super::{compact_vertices, images, uri, ImportOptions, Imported, Limits};
+use super::{
+    compact_vertices, images, uri, ImportOptions, Imported, Limits, INSTANCES, TEXTURES, TRIANGLES,
+};
 use crate::error::ImportError;
 use crate::model::{
     AlphaMode, Instance, InstancedMesh, Material, Submesh, Texture, TextureRef, UvTransform, Wrap,
@@ -233,7 +235,7 @@ fn flatten_scenes(r: &Reader<'_>, limits: &Limits) -> Result<Vec<Placement>, Imp
             .zip(&paths)
             .filter(|(node, _)| node.mesh.is_some())
             .fold(0u64, |a, (_, &p)| a.saturating_add(p));
-        Limits::check("instance count", placed, limits.max_instances)?;
+        Limits::check(INSTANCES, placed, limits.max_instances)?;
     }
     let mut on_path = vec![false; doc.nodes.len()];
     let mut stack: Vec<Step> = roots
@@ -270,11 +272,7 @@ fn flatten_scenes(r: &Reader<'_>, limits: &Limits) -> Result<Vec<Placement>, Imp
                 let transform = to_affine(world * t, || format!("node {n} world transform"))?;
                 placements.push(Placement { mesh, transform });
             }
-            Limits::check(
-                "instance count",
-                placements.len() as u64,
-                limits.max_instances,
-            )?;
+            Limits::check(INSTANCES, placements.len() as u64, limits.max_instances)?;
         }
         on_path[n] = true;
         stack.push(Step::Leave(n));
@@ -530,7 +528,7 @@ fn read_materials(
                         let texture =
                             read_texture(r, t, base_dir, budget, options, &mut pixel_budget)?;
                         Limits::check(
-                            "texture count",
+                            TEXTURES,
                             textures.len() as u64 + 1,
                             options.limits.max_textures,
                         )?;
@@ -639,6 +637,7 @@ fn read_texture(
         declared.as_deref(),
         wrap,
         options.images,
+        options.limits.max_texture_side,
         pixel_budget,
     )
 }
@@ -704,12 +703,8 @@ fn build_instanced_mesh(
             });
             expanded += mesh.submeshes[submesh].triangle_count();
         }
-        Limits::check(
-            "instance count",
-            mesh.instances.len() as u64,
-            limits.max_instances,
-        )?;
-        Limits::check("expanded triangle count", expanded, limits.max_triangles)?;
+        Limits::check(INSTANCES, mesh.instances.len() as u64, limits.max_instances)?;
+        Limits::check(TRIANGLES, expanded, limits.max_triangles)?;
     }
     let mut warnings = Vec::new();
     if skipped_non_triangle > 0 {

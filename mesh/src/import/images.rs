@@ -3,7 +3,7 @@
 
 use std::io::Cursor;
 
-use super::ImageCheck;
+use super::{ImageCheck, Limits, TEXTURE_PIXELS, TEXTURE_SIDE};
 use crate::error::ImportError;
 use crate::model::{Texture, Wrap};
 
@@ -16,6 +16,7 @@ pub(crate) fn checked_texture(
     declared_mime: Option<&str>,
     wrap: (Wrap, Wrap),
     check: ImageCheck,
+    max_side: u64,
     pixel_budget: &mut u64,
 ) -> Result<Texture, ImportError> {
     let fail = |reason: String| ImportError::ImageDecode {
@@ -36,12 +37,13 @@ pub(crate) fn checked_texture(
     let size = image::ImageReader::with_format(Cursor::new(&bytes), format)
         .into_dimensions()
         .map_err(|e| fail(e.to_string()))?;
-    // Count the pixels against the budget before any decode allocates them.
+    // Check the side and count the pixels against the budget before any decode allocates them.
+    Limits::check(TEXTURE_SIDE, u64::from(size.0.max(size.1)), max_side)?;
     let pixels = u64::from(size.0) * u64::from(size.1);
     *pixel_budget = pixel_budget
         .checked_sub(pixels)
         .ok_or(ImportError::LimitExceeded {
-            what: "texture pixels",
+            what: TEXTURE_PIXELS,
             value: pixels,
             limit: *pixel_budget,
         })?;

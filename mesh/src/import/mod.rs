@@ -33,6 +33,9 @@ pub struct Limits {
     pub max_textures: u64,
     /// Pixels over all textures (width times height, summed).
     pub max_texture_pixels: u64,
+    /// The longer side of any one texture, in pixels (read from the image header, before any
+    /// decode).
+    pub max_texture_side: u64,
 }
 
 impl Default for Limits {
@@ -45,6 +48,7 @@ impl Default for Limits {
             max_instances: 10_000_000,
             max_textures: 4096,
             max_texture_pixels: 1 << 30,
+            max_texture_side: 1 << 16,
         }
     }
 }
@@ -58,9 +62,11 @@ impl Limits {
             max_instances: u64::MAX,
             max_textures: u64::MAX,
             max_texture_pixels: u64::MAX,
+            max_texture_side: u64::MAX,
         }
     }
 
+    /// Fails with [`ImportError::LimitExceeded`] when `value` is over `limit`.
     pub(crate) fn check(what: &'static str, value: u64, limit: u64) -> Result<(), ImportError> {
         if value > limit {
             Err(ImportError::LimitExceeded { what, value, limit })
@@ -71,6 +77,50 @@ impl Limits {
 }
 
 /// How much of each image is checked at import.
+/// What [`ImportError::LimitExceeded`] names when the input is over [`Limits::max_bytes`].
+pub(crate) const BYTES: &str = "bytes read, including referenced files and decoded buffers";
+/// ... over [`Limits::max_bytes`] for the file itself.
+pub(crate) const FILE_BYTES: &str = "file size in bytes";
+/// ... over [`Limits::max_triangles`].
+pub(crate) const TRIANGLES: &str = "expanded triangle count";
+/// ... over [`Limits::max_instances`].
+pub(crate) const INSTANCES: &str = "instance count";
+/// ... over [`Limits::max_textures`].
+pub(crate) const TEXTURES: &str = "texture count";
+/// ... over [`Limits::max_texture_pixels`].
+pub(crate) const TEXTURE_PIXELS: &str = "texture pixels";
+/// ... over [`Limits::max_texture_side`].
+pub(crate) const TEXTURE_SIDE: &str = "texture side in pixels";
+
+/// Which of the [`Limits`] an import exceeded (see [`ImportError::limit`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Limit {
+    /// Bytes of the file or of what it references and decodes to.
+    Bytes,
+    /// Expanded triangles.
+    Triangles,
+    /// Instances (or the node visits that would make them).
+    Instances,
+    /// Texture count, pixels or side.
+    Textures,
+    /// A structural bound of the reader (vertex or element counts).
+    Structure,
+}
+
+impl Limit {
+    /// The limit a [`ImportError::LimitExceeded`] with this `what` belongs to.
+    pub(crate) fn of(what: &str) -> Self {
+        match what {
+            BYTES | FILE_BYTES => Self::Bytes,
+            TRIANGLES => Self::Triangles,
+            INSTANCES => Self::Instances,
+            w if w.starts_with("node visits") => Self::Instances,
+            TEXTURES | TEXTURE_PIXELS | TEXTURE_SIDE => Self::Textures,
+            _ => Self::Structure,
+        }
+    }
+}
+
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum ImageCheck {
     /// Read only the header: format and size. Fast; a corrupt body is found only when the
@@ -168,7 +218,7 @@ pub fn import_file(path: &Path, options: &ImportOptions) -> Result<Imported, Imp
         reason,
     };
     let size = std::fs::metadata(path).map_err(io_error)?.len();
-    Limits::check("file size in bytes", size, options.limits.max_bytes)?;
+    Limits::check(FILE_BYTES, size, options.limits.max_bytes)?;
     let bytes = std::fs::read(path).map_err(io_error)?;
     let format = Format::detect(Some(path), &bytes)?;
     let base = path.parent().unwrap_or(Path::new("."));
@@ -183,11 +233,7 @@ pub fn import_bytes(
     base_dir: Option<&Path>,
     options: &ImportOptions,
 ) -> Result<Imported, ImportError> {
-    Limits::check(
-        "file size in bytes",
-        bytes.len() as u64,
-        options.limits.max_bytes,
-    )?;
+    Limits::check(FILE_BYTES, bytes.len() as u64, options.limits.max_bytes)?;
     let imported = match format {
         Format::Glb | Format::Gltf => gltf::import(bytes, base_dir, options)?,
         Format::Ply => ply::import(bytes, options)?,
@@ -201,21 +247,13 @@ pub fn import_bytes(
 
 /// Checks the limits that only the finished model can tell.
 fn check_totals(mesh: &InstancedMesh, limits: &Limits) -> Result<(), ImportError> {
+    Limits::check(INSTANCES, mesh.instances.len() as u64, limits.max_instances)?;
     Limits::check(
-        "instance count",
-        mesh.instances.len() as u64,
-        limits.max_instances,
-    )?;
-    Limits::check(
-        "expanded triangle count",
+        TRIANGLES,
         mesh.expanded_triangle_count(),
         limits.max_triangles,
     )?;
-    Limits::check(
-        "texture count",
-        mesh.textures.len() as u64,
-        limits.max_textures,
-    )?;
+    Limits::check(TEXTURES, mesh.textures.len() as u64, limits.max_textures)?;
     let pixels: u64 = mesh
         .textures
         .iter()

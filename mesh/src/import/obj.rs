@@ -78,11 +78,12 @@ pub(crate) fn import(
                     None,
                     (Wrap::Repeat, Wrap::Repeat),
                     options.images,
+                    options.limits.max_texture_side,
                     &mut pixel_budget,
                 )?;
                 mesh.textures.push(texture);
                 Limits::check(
-                    "texture count",
+                    super::TEXTURES,
                     mesh.textures.len() as u64,
                     options.limits.max_textures,
                 )?;

@@ -64,7 +64,7 @@ pub(crate) fn resolve(
 /// Subtracts `n` from the remaining byte budget, or fails if it does not fit.
 pub(crate) fn take_budget(budget: &mut u64, n: u64) -> Result<(), ImportError> {
     *budget = budget.checked_sub(n).ok_or(ImportError::LimitExceeded {
-        what: "bytes read, including referenced files and decoded buffers",
+        what: super::BYTES,
         value: n,
         limit: *budget,
     })?;
