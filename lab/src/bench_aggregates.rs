@@ -8,14 +8,13 @@ use std::path::Path;
 use anyhow::Context;
 use glam::Vec3;
 use horizon_aggregate::{
-    build_aggregates, AggregateOptions, AggregateStore, BuildOptions, BuildReport, LevelTime,
-    Progress,
+    build_aggregates, AggregateOptions, BuildOptions, BuildReport, LevelTime, Progress,
 };
 use horizon_bvh::Bvh;
 use horizon_mesh::rng::Rng;
 use horizon_server::outln;
 use horizon_server::terminal::ProgressBar;
-use horizon_world::{write_atomically, World};
+use horizon_world::{write_atomically, AggregateSink, Describe, World};
 use serde::Serialize;
 
 /// What `horizon-lab bench-aggregates` measures.
@@ -49,44 +48,34 @@ pub struct AggregateBench {
 /// Full build of `DIR/aggregates` from scratch, then `insert` seeded objects into the tree
 /// and an incremental rebuild; the world's manifest is restored to the full build's.
 pub fn run(dir: &Path, insert: usize, seed: u64, out: Option<&Path>) -> anyhow::Result<()> {
-    let mut world = World::open(dir)?;
-    world.load_tree()?;
-    let models = world.source_models()?;
-    let store = world.aggregate_dir();
-    if store.root().exists() {
-        std::fs::remove_dir_all(store.root())
-            .with_context(|| format!("cannot clear {}", store.root().display()))?;
-    }
+    let world = World::open(dir)?;
+    world.ensure_tree()?;
+    // A full build from scratch.
+    world.forget_aggregates()?;
     let options = AggregateOptions::default();
     let bar = ProgressBar::new("full build");
     let full = world
-        .rebuild_aggregates(&models, options, &|p: Progress| bar.show(p.done, p.total))?
+        .rebuild_aggregates(options, &|p: Progress| bar.show(p.done, p.total))?
         .build;
     bar.finish();
-    let full_manifest = store
-        .read_manifest()?
-        .context("full build wrote no manifest")?;
+    let full_manifest = world
+        .published_manifest()?
+        .context("full build published no manifest")?;
 
-    // Insert seeded copies of existing models at random places.
-    let Some(bvh) = world.tree() else {
-        anyhow::bail!("no built world in {}", dir.display());
-    };
-    let bounds = bvh
-        .node(bvh.root())
+    // Seeded copies of existing models at random places, inserted into a copy of the tree:
+    // the world itself is left as it was.
+    let mut tree = world.with_tree(|t| t.clone())?;
+    let bounds = tree
+        .bvh
+        .node(tree.bvh.root())
         .map(|n| n.aabb())
         .context("the world is empty")?;
-    let model_count = world.manifest().models.len();
+    let models = world.models();
     let mut rng = Rng::new(seed);
-    let mut placed = Vec::new();
+    let mut inserted = Vec::new();
     for _ in 0..insert {
-        let m = rng.below(model_count);
-        let hash = &world.manifest().models[m].hash;
-        let d = world
-            .descriptors()
-            .models
-            .get(hash)
-            .context("model without descriptors")?
-            .clone();
+        let m = rng.below(models.len()) as u64;
+        let d = models.descriptors_of(m)?;
         let t = glam::Affine3A::from_rotation_translation(
             glam::Quat::from_rotation_y(rng.range(0.0, std::f32::consts::TAU)),
             Vec3::new(
@@ -95,16 +84,9 @@ pub fn run(dir: &Path, insert: usize, seed: u64, out: Option<&Path>) -> anyhow::
                 rng.range(bounds.min.z, bounds.max.z),
             ),
         );
-        placed.push((m, t, d));
-    }
-    let Some(bvh) = world.tree_mut() else {
-        anyhow::bail!("no built world in {}", dir.display());
-    };
-    let mut inserted = Vec::new();
-    for (m, t, d) in &placed {
-        let id = bvh.insert(&horizon_bvh::NewObject {
-            model: *m as u64,
-            transform: *t,
+        let id = tree.bvh.insert(&horizon_bvh::NewObject {
+            model: m,
+            transform: t,
             sphere: horizon_bvh::Sphere::new(
                 t.transform_point3(Vec3::from_array(d.centre)),
                 d.radius,
@@ -114,7 +96,7 @@ pub fn run(dir: &Path, insert: usize, seed: u64, out: Option<&Path>) -> anyhow::
         })?;
         inserted.push(id);
     }
-    let bvh: &Bvh = world.tree().context("the tree went away")?;
+    let bvh: &Bvh = &tree.bvh;
     let mut ancestors = BTreeSet::new();
     for &id in &inserted {
         let mut at = bvh.object(id).map(|o| o.leaf());
@@ -123,13 +105,15 @@ pub fn run(dir: &Path, insert: usize, seed: u64, out: Option<&Path>) -> anyhow::
             at = bvh.node(n).and_then(|r| r.parent());
         }
     }
-    // No garbage collection: the full build's manifest comes back below.
+    // Built into the world's stores but not published: the world keeps serving the full
+    // build, and the next rebuild collects what this one wrote.
     let bar = ProgressBar::new("incremental");
     let build_options = BuildOptions {
         aggregate: options,
-        world_textures: models.texture_totals(),
+        world_textures: models.texture_totals()?,
     };
-    let outcome = build_aggregates(bvh, &models, &store, &build_options, &|p: Progress| {
+    let sink = AggregateSink::new(world.meta(), world.blobs(), Some(full_manifest.clone()));
+    let outcome = build_aggregates(bvh, models, &sink, &build_options, &|p: Progress| {
         bar.show(p.done, p.total)
     })?;
     bar.finish();
@@ -143,11 +127,8 @@ pub fn run(dir: &Path, insert: usize, seed: u64, out: Option<&Path>) -> anyhow::
         .collect();
     let ancestors_missed = ancestors.difference(&rebuilt).count();
     let rebuild_bound = 2 * insert * (bvh.height() as usize + 1);
-    // The world on disk is still the one without the inserted objects.
-    store.write_manifest(&full_manifest)?;
-    store.collect_garbage(&full_manifest)?;
     let result = AggregateBench {
-        world: world.manifest().name.clone(),
+        world: world.identity()?.0,
         objects: bvh.len() - insert,
         nodes: full.nodes,
         incremental_ratio: incremental.seconds / full.seconds.max(1e-9),

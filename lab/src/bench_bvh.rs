@@ -29,6 +29,7 @@ use horizon_server::outln;
 use horizon_world::{write_atomically, World};
 use serde::Serialize;
 
+use crate::input::BvhInput;
 use crate::views::{viewpoints, EYE_HEIGHT};
 
 /// Hysteresis of the standing query (the library's default).
@@ -193,11 +194,9 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
     // Load the world and its descriptors.
     let t = Instant::now();
     let world = World::open(dir)?;
-    if world.descriptors().models.is_empty() {
-        anyhow::bail!("{} is not built (run horizon build)", dir.display());
-    }
-    let manifest = world.manifest();
-    let input = world.bvh_input()?;
+    let (name, _) = world.identity()?;
+    let held = BvhInput::of(&world)?;
+    let input = held.objects();
     let load_seconds = t.elapsed().as_secs_f64();
     let n = input.len();
     if n == 0 {
@@ -205,8 +204,7 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
     }
     let threads = rayon::current_num_threads();
     progress(&format!(
-        "{}: {n} objects loaded in {load_seconds:.2} s",
-        manifest.name
+        "{name}: {n} objects loaded in {load_seconds:.2} s"
     ));
     let one_core = rayon::ThreadPoolBuilder::new()
         .num_threads(1)
@@ -214,7 +212,7 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
         .context("cannot start a one-thread pool")?;
 
     // 1. Bulk rebuild, all cores.
-    let options = world.bvh_options(DEFAULT_MU, DEFAULT_W);
+    let options = world.bvh_options(DEFAULT_MU, DEFAULT_W)?;
     let t = Instant::now();
     let bulk = Bvh::bulk_build(options.clone(), &input)?;
     let seconds = t.elapsed().as_secs_f64();
@@ -355,10 +353,10 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
     }
 
     let report = BenchReport {
-        world: manifest.name.clone(),
+        world: name.clone(),
         dir: dir.display().to_string(),
         objects: n,
-        models: manifest.models.len(),
+        models: world.models().len(),
         threads,
         load_average_before: load_before,
         load_average_after: load_average(),

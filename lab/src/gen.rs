@@ -24,13 +24,14 @@ pub fn world(name: &str, dir: &Path, seed: u64, assets: Option<&Path>) -> anyhow
         Vec::new()
     };
     let g = horizon_server::generated::write_world(name, dir, seed, &extra)?;
-    let manifest = g.world.manifest();
-    let bytes: u64 = manifest.models.iter().map(|m| m.bytes).sum();
+    let status = g.world.status()?;
+    let rows = g.world.models().rows()?;
+    let bytes: u64 = rows.iter().map(|m| m.bytes).sum();
     outln!(
         "{name} (seed {seed}) -> {}: {} objects, {} unique models ({} user), {bytes} model bytes; generated in {:.2} s, written in {:.2} s",
         dir.display(),
-        manifest.object_count,
-        manifest.model_count,
+        status.objects,
+        rows.len(),
         extra.len(),
         g.generate_seconds,
         g.write_seconds

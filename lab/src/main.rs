@@ -13,7 +13,7 @@
 //!   `bench_descriptors.rs`: `bench-descriptors`.
 //! - `calibrate.rs`: `calibrate`, Table 1.
 //! - `distance.rs`: `distance`, the Hausdorff yardstick.
-//! - `views.rs`: the seeded viewpoints they share.
+//! - `views.rs`: the seeded viewpoints they share; `input.rs`: a built world's BVH input.
 
 mod bench_aggregates;
 mod bench_bvh;
@@ -21,6 +21,7 @@ mod bench_descriptors;
 mod calibrate;
 mod distance;
 mod gen;
+mod input;
 mod measuring;
 mod report;
 mod sweep;

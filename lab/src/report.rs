@@ -14,7 +14,7 @@ use horizon_aggregate::{build_subtrees, AggregateManifest, BuildOptions, Progres
 use horizon_bvh::{Bvh, CutItem, CutQuery};
 use horizon_server::outln;
 use horizon_server::terminal::ProgressBar;
-use horizon_world::{World, WorldManifest};
+use horizon_world::World;
 use serde::Serialize;
 
 use crate::measuring::MeasuringStore;
@@ -80,13 +80,11 @@ pub fn run(
     if !(min_solid_angle.is_finite() && min_solid_angle > 0.0) {
         anyhow::bail!("--min-solid-angle {min_solid_angle} must be a positive number");
     }
-    let mut world = World::open(dir)?;
-    world.load_tree()?;
-    let bvh = world.tree().context("no tree")?;
-    let manifest = world.manifest();
+    let world = World::open(dir)?;
+    let tree = world.with_tree(|t| t.clone())?;
+    let bvh = &tree.bvh;
     let ours = world
-        .aggregate_dir()
-        .read_manifest()?
+        .published_manifest()?
         .with_context(|| format!("no aggregates in {} (run horizon build)", dir.display()))?;
     // The cuts of the seeded viewpoints.
     let bounds = bvh
@@ -110,10 +108,10 @@ pub fn run(
     // would not fit in memory on a large world, and no cut here shows them).
     let t = Instant::now();
     let base_store = MeasuringStore::new(&dir.join("baseline"));
-    let models = world.source_models()?;
+    let models = world.models();
     let baseline_options = BuildOptions {
         aggregate: ours.options.unoptimized(),
-        world_textures: models.texture_totals(),
+        world_textures: models.texture_totals()?,
     };
     let shown: BTreeSet<u32> = cuts
         .iter()
@@ -126,7 +124,7 @@ pub fn run(
     let bar = ProgressBar::new("baseline");
     let outcome = build_subtrees(
         bvh,
-        &models,
+        models,
         &base_store,
         &baseline_options,
         &shown,
@@ -142,21 +140,27 @@ pub fn run(
     let base = outcome.manifest;
     // Assets: models by BVH number (counted from the models already loaded for the
     // baseline, not read again), aggregates by node.
-    let model_assets: Vec<Asset> = manifest
-        .models
+    let rows = models.rows()?;
+    let model_assets: Vec<(String, Asset)> = rows
         .iter()
-        .enumerate()
-        .map(|(i, m)| -> anyhow::Result<Asset> {
-            let mesh = &horizon_aggregate::ModelSource::model(&models, i as u64)?.mesh;
-            Ok(Asset {
-                bytes: m.bytes,
-                draws: mesh.submeshes.len() as u64,
-                textures: mesh.textures.len() as u64,
-            })
+        .map(|m| -> anyhow::Result<(String, Asset)> {
+            let mesh = &models.source(m.number)?.mesh;
+            Ok((
+                m.asset.clone(),
+                Asset {
+                    bytes: m.bytes,
+                    draws: mesh.submeshes.len() as u64,
+                    textures: mesh.textures.len() as u64,
+                },
+            ))
         })
         .collect::<anyhow::Result<_>>()?;
-    drop(models);
-    let naive_bytes: u64 = manifest.models.iter().map(|m| m.bytes).sum();
+    let naive_bytes: u64 = rows
+        .iter()
+        .map(|m| (m.asset.as_str(), m.bytes))
+        .collect::<HashMap<_, _>>()
+        .values()
+        .sum();
     let aggregate_assets = |m: &AggregateManifest| -> HashMap<u32, (String, Asset)> {
         m.nodes
             .iter()
@@ -181,8 +185,8 @@ pub fn run(
     let mut sums = [0.0f64; 8];
     let mut per_view = Vec::new();
     for entries in &cuts {
-        let a = join(bvh, entries, &model_assets, &ours_assets, manifest)?;
-        let b = join(bvh, entries, &model_assets, &base_assets, manifest)?;
+        let a = join(bvh, entries, &model_assets, &ours_assets)?;
+        let b = join(bvh, entries, &model_assets, &base_assets)?;
         let aggregates = entries
             .iter()
             .filter(|e| matches!(e.item, CutItem::Aggregate(_)))
@@ -264,9 +268,8 @@ fn print_report(dir: &Path, r: &Report) -> std::io::Result<()> {
 fn join(
     bvh: &Bvh,
     entries: &[horizon_bvh::CutEntry],
-    models: &[Asset],
+    models: &[(String, Asset)],
     aggregates: &HashMap<u32, (String, Asset)>,
-    manifest: &WorldManifest,
 ) -> anyhow::Result<Asset> {
     let mut seen_models = BTreeSet::new();
     let mut seen_aggregates = BTreeSet::new();
@@ -275,11 +278,11 @@ fn join(
         match e.item {
             CutItem::Object(o) => {
                 let model = bvh.object(o).context("cut names a missing object")?.model() as usize;
-                let a = models
+                let (asset, a) = models
                     .get(model)
-                    .with_context(|| format!("model {model} of {} missing", manifest.name))?;
+                    .with_context(|| format!("model {model} missing"))?;
                 out.draws += a.draws;
-                if seen_models.insert(model) {
+                if seen_models.insert(asset.clone()) {
                     out.bytes += a.bytes;
                     out.textures += a.textures;
                 }

@@ -11,6 +11,7 @@ use horizon_server::outln;
 use horizon_world::World;
 use serde::Serialize;
 
+use crate::input::BvhInput;
 use crate::views::viewpoints;
 
 /// One row of `horizon-lab sweep`: the average query cost of one world's tree built with one
@@ -55,11 +56,9 @@ pub fn run(
     let mut rows = Vec::new();
     for dir in dirs {
         let world = World::open(dir)?;
-        if world.descriptors().models.is_empty() {
-            anyhow::bail!("{} is not built (run horizon build)", dir.display());
-        }
-        let manifest = world.manifest();
-        let input = world.bvh_input()?;
+        let (name, _) = world.identity()?;
+        let held = BvhInput::of(&world)?;
+        let input = held.objects();
         // Mean nodes visited, cut size and seconds over the same seeded viewpoints.
         let measure = |bounds: &horizon_bvh::Aabb, cut: &dyn Fn(&CutQuery) -> (usize, usize)| {
             let (mut visited, mut size, mut seconds) = (0usize, 0usize, 0.0f64);
@@ -82,7 +81,7 @@ pub fn run(
         for mu in SWEEP_MU {
             for w in SWEEP_W {
                 let started = Instant::now();
-                let bvh = Bvh::bulk_build(world.bvh_options(mu, w), &input)?;
+                let bvh = Bvh::bulk_build(world.bvh_options(mu, w)?, &input)?;
                 let build_seconds = started.elapsed().as_secs_f64();
                 let Some(root) = bvh.node(bvh.root()) else {
                     anyhow::bail!("{} has no objects", dir.display());
@@ -93,7 +92,7 @@ pub fn run(
                     (cut.nodes_visited, cut.entries.len())
                 });
                 rows.push(SweepRow {
-                    world: manifest.name.clone(),
+                    world: name.clone(),
                     tree: "similarity",
                     mu: Some(mu),
                     w: Some(w),
@@ -117,7 +116,7 @@ pub fn run(
                 (cut.nodes_visited, cut.entries.len())
             });
             rows.push(SweepRow {
-                world: manifest.name.clone(),
+                world: name.clone(),
                 tree: "obvhs",
                 mu: None,
                 w: None,

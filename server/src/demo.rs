@@ -82,19 +82,18 @@ fn world(out: &Path) -> anyhow::Result<()> {
         std::fs::remove_dir_all(&dir).with_context(|| format!("cannot clear {}", dir.display()))?;
     }
     let generated = horizon_server::generated::write_world("village", &dir, 1, &[])?;
+    let status = generated.world.status()?;
     outln!(
         "village -> {}: {} objects, {} unique models",
         dir.display(),
-        generated.world.objects().len(),
-        generated.world.manifest().models.len()
+        status.objects,
+        status.models
     )?;
     let options = AggregateOptions::default();
     crate::world_cmd::build(&dir, DEFAULT_MU, DEFAULT_W, Some(options), false)?;
-    let mut world = horizon_world::World::open(&dir)?;
-    let bvh = world.load_tree()?;
-    let bounds = bvh
-        .node(bvh.root())
-        .map(|n| n.aabb())
+    let world = horizon_world::World::open(&dir)?;
+    let bounds = world
+        .with_tree(|t| t.bvh.node(t.bvh.root()).map(|n| n.aabb()))?
         .context("the village is empty")?;
     let centre = (bounds.min + bounds.max) * 0.5;
     let eye = glam::Vec3::new(centre.x, 2.0, centre.z);
@@ -110,7 +109,7 @@ fn world(out: &Path) -> anyhow::Result<()> {
         .count();
     outln!(
         "a viewer at {eye} sees all {} objects as {} entries: {} objects as themselves, {} aggregates",
-        world.objects().len(),
+        world.status()?.objects,
         cut.entries.len(),
         cut.entries.len() - aggregates,
         aggregates

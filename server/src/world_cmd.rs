@@ -25,14 +25,13 @@ struct BuildSummary {
     load_seconds: f64,
     descriptor_seconds: f64,
     bvh_seconds: f64,
-    write_seconds: f64,
     /// The aggregate stage, unless `--bvh-only`.
     aggregates: Option<RebuildReport>,
 }
 
 /// Builds the world in `dir`: descriptors of the models not described yet, the BVH with
-/// eq. 1's `mu` and `w` (its snapshot written), and, unless `aggregates` is `None`, every
-/// node's aggregate.
+/// eq. 1's `mu` and `w` (its snapshot stored), and, unless `aggregates` is `None`, every
+/// node's aggregate, published.
 pub fn build(
     dir: &Path,
     mu: f32,
@@ -41,7 +40,7 @@ pub fn build(
     json: bool,
 ) -> anyhow::Result<()> {
     let t0 = Instant::now();
-    let mut world = World::open(dir)?;
+    let world = World::open(dir)?;
     let load_seconds = t0.elapsed().as_secs_f64();
 
     let t1 = Instant::now();
@@ -52,42 +51,31 @@ pub fn build(
 
     let t2 = Instant::now();
     note("building the BVH");
-    world.build_tree(mu, w)?;
+    let (objects, nodes, height) = world.build_tree(mu, w)?;
     let bvh_seconds = t2.elapsed().as_secs_f64();
-
-    let t3 = Instant::now();
-    note("writing the snapshot");
-    world.save_tree()?;
-    let write_seconds = t3.elapsed().as_secs_f64();
 
     let aggregates = match aggregates {
         Some(options) => {
-            note("loading models");
-            let models = world.source_models()?;
             let bar = ProgressBar::new("aggregates");
-            let report = world
-                .rebuild_aggregates(&models, options, &|p: Progress| bar.show(p.done, p.total))?;
+            let report =
+                world.rebuild_aggregates(options, &|p: Progress| bar.show(p.done, p.total))?;
             bar.finish();
             Some(report)
         }
         None => None,
     };
 
-    let Some(bvh) = world.tree() else {
-        anyhow::bail!("the build left no tree");
-    };
-    let models = world.manifest().models.len();
+    let models = world.models().len();
     let summary = BuildSummary {
-        objects: bvh.len(),
+        objects,
         models,
         descriptors_computed,
         descriptors_reused: models - descriptors_computed,
-        nodes: bvh.node_count(),
-        height: bvh.height(),
+        nodes,
+        height,
         load_seconds,
         descriptor_seconds,
         bvh_seconds,
-        write_seconds,
         aggregates,
     };
     if json {
@@ -108,7 +96,7 @@ pub fn build(
 
 fn print_summary(dir: &Path, s: &BuildSummary) -> std::io::Result<()> {
     outln!(
-        "built {}: {} objects, {} models ({} described, {} reused), {} nodes, height {}; load {:.2} s, descriptors {:.2} s, bvh {:.2} s, write {:.2} s",
+        "built {}: {} objects, {} models ({} described, {} reused), {} nodes, height {}; load {:.2} s, descriptors {:.2} s, bvh {:.2} s",
         dir.display(),
         s.objects,
         s.models,
@@ -119,21 +107,16 @@ fn print_summary(dir: &Path, s: &BuildSummary) -> std::io::Result<()> {
         s.load_seconds,
         s.descriptor_seconds,
         s.bvh_seconds,
-        s.write_seconds
     )?;
     if let Some(r) = &s.aggregates {
         let a = &r.build;
-        let removed = if r.removed.files > 0 {
-            format!(
-                "; {} files of earlier builds removed ({:.1} MB)",
-                r.removed.files,
-                r.removed.bytes as f64 / 1e6
-            )
+        let removed = if r.removed_blobs > 0 {
+            format!("; {} blobs of earlier builds removed", r.removed_blobs)
         } else {
             String::new()
         };
         outln!(
-            "aggregates: {} nodes, {} built, {} reused, {} failed; {:.1} MB written, {:.1} MB in all; {:.1} s{}{removed}",
+            "aggregates: {} nodes, {} built, {} reused, {} failed; {:.1} MB written, {:.1} MB in all; {:.1} s{}; generation {} published{removed}",
             a.nodes,
             a.built,
             a.reused,
@@ -142,21 +125,22 @@ fn print_summary(dir: &Path, s: &BuildSummary) -> std::io::Result<()> {
             a.bytes_total as f64 / 1e6,
             a.seconds,
             if a.atlas { ", atlased" } else { "" },
+            r.generation,
         )?;
     }
     Ok(())
 }
 
-/// One entry of `horizon cut --json`.
+/// One entry of `horizon cut --json`: an object by its world id, an aggregate by its node.
 #[derive(Debug, Serialize)]
 struct EntryReport {
-    id: u32,
+    id: u64,
     kind: &'static str,
     parent: Option<u32>,
     covers: u32,
     solid_angle: f32,
     #[serde(skip_serializing_if = "Option::is_none")]
-    objects: Option<Vec<u32>>,
+    objects: Option<Vec<u64>>,
 }
 
 /// What `horizon cut --json` prints.
@@ -203,8 +187,7 @@ pub fn cut(
     if max_results == 0 {
         anyhow::bail!("--max-results must be at least 1");
     }
-    let mut world = World::open(dir)?;
-    world.load_tree()?;
+    let world = World::open(dir)?;
     let query = CutQuery {
         position,
         min_solid_angle,
@@ -213,38 +196,38 @@ pub fn cut(
     let started = Instant::now();
     let result = world.cut(&query)?;
     let seconds = started.elapsed().as_secs_f64();
-    let Some(bvh) = world.tree() else {
-        anyhow::bail!("no built world in {} (run horizon build)", dir.display());
-    };
-    let mut under = Vec::new();
-    let entries: Vec<EntryReport> = result
-        .entries
-        .iter()
-        .map(|e| {
-            let (id, objects) = match e.item {
-                CutItem::Object(ObjectId(o)) => (o, explain.then(|| vec![o])),
-                CutItem::Aggregate(node) => {
-                    let objects = explain.then(|| {
-                        under.clear();
-                        bvh.objects_under(node, &mut under);
-                        under.iter().map(|o| o.0).collect()
-                    });
-                    (node.0, objects)
+    let entries: Vec<EntryReport> = world.with_tree(|tree| {
+        let mut under = Vec::new();
+        let world_id = |o: ObjectId| tree.world_id(o).unwrap_or(u64::from(o.0));
+        result
+            .entries
+            .iter()
+            .map(|e| {
+                let (id, objects) = match e.item {
+                    CutItem::Object(o) => (world_id(o), explain.then(|| vec![world_id(o)])),
+                    CutItem::Aggregate(node) => {
+                        let objects = explain.then(|| {
+                            under.clear();
+                            tree.bvh.objects_under(node, &mut under);
+                            under.iter().map(|&o| world_id(o)).collect()
+                        });
+                        (u64::from(node.0), objects)
+                    }
+                };
+                EntryReport {
+                    id,
+                    kind: match e.kind() {
+                        EntryKind::Object => "object",
+                        EntryKind::Aggregate => "aggregate",
+                    },
+                    parent: e.parent.map(|p| p.0),
+                    covers: e.covers,
+                    solid_angle: e.solid_angle,
+                    objects,
                 }
-            };
-            EntryReport {
-                id,
-                kind: match e.kind() {
-                    EntryKind::Object => "object",
-                    EntryKind::Aggregate => "aggregate",
-                },
-                parent: e.parent.map(|p| p.0),
-                covers: e.covers,
-                solid_angle: e.solid_angle,
-                objects,
-            }
-        })
-        .collect();
+            })
+            .collect()
+    })?;
     let aggregates = entries.iter().filter(|e| e.kind == "aggregate").count();
     let report = CutReport {
         objects: entries.len() - aggregates,

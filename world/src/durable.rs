@@ -82,7 +82,12 @@ pub(crate) fn sync_files<'a>(
 /// Syncs the folder holding `path`, so that a rename into it is durable (not supported on
 /// every platform; a failure is not an error).
 pub(crate) fn sync_folder(path: &Path) {
-    if let Ok(d) = std::fs::File::open(folder_of(path)) {
+    sync_dir(folder_of(path));
+}
+
+/// Syncs the folder `dir` itself (see [`sync_folder`]).
+pub(crate) fn sync_dir(dir: &Path) {
+    if let Ok(d) = std::fs::File::open(dir) {
         let _ = d.sync_all();
     }
 }

@@ -39,6 +39,33 @@ pub enum WorldError {
         /// What went wrong.
         reason: String,
     },
+    /// Uploaded bytes are not a model this world takes (see [`BadModel`]).
+    #[error("{reason}")]
+    BadModel {
+        /// Which rule it broke.
+        kind: BadModel,
+        /// What is wrong, in one line.
+        reason: String,
+    },
+    /// A transform is not a placement: NaN or infinite numbers, a zero or negative scale, a
+    /// rotation that is not a unit quaternion.
+    #[error("{0}")]
+    InvalidTransform(String),
+    /// An object names a model the world does not have.
+    #[error("{0}")]
+    UnknownModel(String),
+    /// No such object, model or blob.
+    #[error("{0}")]
+    NotFound(String),
+    /// The object belongs to someone else.
+    #[error("{0}")]
+    Forbidden(String),
+    /// The change would take a user past their quota.
+    #[error("{0}")]
+    QuotaExceeded(String),
+    /// The metadata database failed.
+    #[error("database: {0}")]
+    Database(String),
     /// The BVH refused its input.
     #[error(transparent)]
     Bvh(#[from] horizon_bvh::BvhError),
@@ -48,6 +75,21 @@ pub enum WorldError {
     /// The aggregate rebuild failed as a whole.
     #[error(transparent)]
     Aggregate(#[from] horizon_aggregate::AggregateError),
+}
+
+/// The rules an uploaded model can break.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BadModel {
+    /// Not glTF, truncated, buffers out of range, an external URI, invalid geometry.
+    Malformed,
+    /// More expanded triangles than the limit.
+    TooManyTriangles,
+    /// A texture over the side or pixel limit.
+    TextureTooLarge,
+    /// More instances than the limit.
+    TooManyInstances,
+    /// Bigger than the byte limit.
+    TooLarge,
 }
 
 impl WorldError {

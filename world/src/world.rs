@@ -1,33 +1,51 @@
-//! [`World`]: one world directory opened, and everything the product does to it as functions
-//! over it. Create (ingest every model, place the objects) -> describe the models -> build
-//! the similarity-aware BVH (core paper eq. 1, section 4.3) -> rebuild the aggregates
-//! (sections 5 to 7) -> cut (eq. 3).
+//! [`World`]: one world directory, opened, and everything the product does to it as functions
+//! over it. Thread-safe: requests, the rebuild and readers share one `World`.
+//!
+//! ```text
+//! DIR/world.db     the metadata (SqliteMeta): models, objects, users, generations, log, entries
+//! DIR/blobs/       the content-addressed blobs (BlobDir): models, aggregates, manifests, trees
+//! ```
+//!
+//! The pipeline: create or upload (ingest every model, place the objects) -> describe the
+//! models -> the similarity-aware BVH (core paper eq. 1, section 4.3) -> the aggregates
+//! (sections 5 to 7), published as one step -> cuts (eq. 3).
+//!
+//! **Generations.** Every committed mutation is a generation. A mutation commits in the
+//! metadata store first (durable when the call returns), then goes into the tree, under one
+//! writer lock, so the tree applies changes in generation order and can be replayed from its
+//! snapshot and the log after a crash (`tree.rs`). The rebuild takes a copy of the tree at
+//! generation g, builds what changed, and publishes g; changes made meanwhile stay dirty for
+//! the next rebuild.
 
-use std::collections::HashMap;
-use std::path::Path;
-use std::sync::atomic::{AtomicUsize, Ordering};
+use std::collections::{BTreeMap, HashMap, HashSet};
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Condvar, Mutex, MutexGuard, RwLock};
+use std::time::{Duration, Instant};
 
-use glam::{Affine3A, Vec3};
+use glam::Affine3A;
 use horizon_aggregate::{
-    build_aggregates, AggregateOptions, BuildOptions, BuildReport, InMemoryModels, Progress,
-    SourceModel,
+    build_aggregates, AggregateManifest, AggregateOptions, BuildOptions, BuildReport, Progress,
 };
-use horizon_bvh::{Bvh, BvhOptions, Cut, CutQuery, NewObject, Sphere};
+use horizon_bvh::{Aabb, BvhOptions, Cut, CutQuery, NodeId};
 use horizon_descriptors::{csd_distance, zernike_distance};
 use horizon_mesh::rng::Rng;
-use horizon_mesh::{import_file, ImportOptions, InstancedMesh};
+use horizon_mesh::InstancedMesh;
 use rayon::prelude::*;
 use serde::Serialize;
 
-use crate::aggregates::{AggregateDir, Garbage};
-use crate::dir::{
-    DescriptorCache, ModelDescriptors, ModelRecord, ObjectList, ObjectRecord, WorldDir,
-    WorldManifest, FORMAT,
-};
-use crate::durable::write_atomically;
+use crate::aggregates::{named_blobs, recorded_entries, AggregateSink};
 use crate::error::WorldError;
 use crate::hash::content_hash;
-use crate::ingest::{describe_stored, normalise};
+use crate::ingest::{describe_stored, import_upload, normalise, stats, UploadLimits};
+use crate::legacy::{is_legacy, LegacyWorld};
+use crate::models::Models;
+use crate::store::{
+    Applied, BlobDir, BlobStore, MetaStore, ModelRow, Mutation, NewModel, ObjectRow, Published,
+    Snapshot, SqliteMeta, User,
+};
+#[cfg(doc)]
+use crate::tree::Describe;
+use crate::tree::Tree;
 
 /// Distinct models up to which the BVH's descriptor scales come from every pair of them;
 /// above it, from [`SCALE_SAMPLE_PAIRS`] seeded pairs.
@@ -36,16 +54,60 @@ const SCALE_ALL_PAIRS_UP_TO: usize = 400;
 const SCALE_SAMPLE_PAIRS: usize = 40_000;
 /// Seed of that sample, fixed so that a world always gets the same tree.
 const SCALE_SAMPLE_SEED: u64 = 0x5CA1E;
+/// Changes logged after which the rebuild writes a new tree snapshot, so that a restart
+/// replays at most about this many.
+pub const SNAPSHOT_EVERY: u64 = 10_000;
 
-/// A world directory, opened: its manifest, objects and descriptor cache in memory, and the
-/// BVH once built or loaded.
+/// A world, opened (see the module docs).
 #[derive(Debug)]
 pub struct World {
-    dir: WorldDir,
-    manifest: WorldManifest,
-    objects: ObjectList,
-    descriptors: DescriptorCache,
-    tree: Option<Bvh>,
+    root: PathBuf,
+    meta: Arc<dyn MetaStore>,
+    blobs: Arc<dyn BlobStore>,
+    models: Models,
+    limits: UploadLimits,
+    /// Held by a mutation from its commit until the tree has it.
+    writer: Mutex<()>,
+    tree: RwLock<Option<Tree>>,
+    status: Mutex<Status>,
+    /// Signalled on every committed mutation and publish.
+    changed: Condvar,
+}
+
+/// What changes between rebuilds.
+#[derive(Debug, Default)]
+struct Status {
+    generation: u64,
+    published: Published,
+    objects: u64,
+    /// Nodes changed since the published generation, with the generation that last changed
+    /// each.
+    dirty: BTreeMap<NodeId, u64>,
+    /// When the first change not yet published was committed.
+    first_change: Option<Instant>,
+    /// When the last change was committed.
+    last_change: Option<Instant>,
+    /// The snapshot's generation.
+    snapshot: u64,
+}
+
+/// A summary of the world, for `GET /v1/world` and the command line.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct WorldStatus {
+    /// The last committed generation.
+    pub generation: u64,
+    /// The published generation.
+    pub published: u64,
+    /// Objects.
+    pub objects: u64,
+    /// Models.
+    pub models: u64,
+    /// Nodes dirty since the published generation.
+    pub dirty_nodes: u64,
+    /// Wall time of the rebuild that published, milliseconds.
+    pub last_rebuild_ms: Option<u64>,
+    /// The box of every object, if the tree is loaded and not empty.
+    pub bounds: Option<Aabb>,
 }
 
 /// What [`World::rebuild_aggregates`] did.
@@ -54,14 +116,41 @@ pub struct RebuildReport {
     /// The rebuild.
     #[serde(flatten)]
     pub build: BuildReport,
-    /// Files of earlier builds that the new manifest no longer names, deleted.
-    pub removed: Garbage,
+    /// The generation it published.
+    pub generation: u64,
+    /// Blobs of earlier builds that no published manifest names any more, deleted.
+    pub removed_blobs: usize,
+}
+
+/// One change a user asks for.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Change {
+    /// Place the model with this id.
+    Create {
+        /// The model's id.
+        model: String,
+        /// Model-to-world transform.
+        transform: Affine3A,
+    },
+    /// Give an object a new transform.
+    Move {
+        /// The object.
+        id: u64,
+        /// Its new transform.
+        transform: Affine3A,
+    },
+    /// Remove an object.
+    Delete {
+        /// The object.
+        id: u64,
+    },
 }
 
 impl World {
     /// Writes a new world into `root`: every model normalised and stored under its content
-    /// hash (models whose GLBs are identical share one file and one record, the first name
-    /// kept), then the objects, each `(index into models, model-to-world transform)`.
+    /// hash (models whose GLBs are identical share one record, the first name kept), then
+    /// the objects, each `(index into models, model-to-world transform)`, in one generation
+    /// each.
     pub fn create(
         root: &Path,
         name: &str,
@@ -69,159 +158,388 @@ impl World {
         models: &[(String, InstancedMesh)],
         objects: &[(usize, Affine3A)],
     ) -> Result<World, WorldError> {
-        let dir = WorldDir::new(root);
-        std::fs::create_dir_all(dir.models()).map_err(|e| WorldError::io(dir.models(), e))?;
-        // Normalise, hash and store every model in parallel.
-        let stored: Vec<(String, u64)> = models
-            .par_iter()
-            .map(|(model_name, mesh)| -> Result<(String, u64), WorldError> {
-                let glb = normalise(model_name, mesh)?;
-                let hash = content_hash(&glb);
-                let path = dir.model(&hash);
-                if !path.exists() {
-                    write_atomically(&path, &glb)?;
-                }
-                Ok((hash, glb.len() as u64))
-            })
-            .collect::<Result<_, _>>()?;
-        let mut records: Vec<ModelRecord> = Vec::new();
-        let mut seen = HashMap::new();
-        for ((model_name, _), (hash, bytes)) in models.iter().zip(&stored) {
-            seen.entry(hash.clone()).or_insert_with(|| {
-                records.push(ModelRecord {
-                    hash: hash.clone(),
-                    name: model_name.clone(),
-                    bytes: *bytes,
-                });
-            });
+        if root.join("world.db").exists() || is_legacy(root) {
+            return Err(WorldError::Inconsistent(format!(
+                "{} already holds a world",
+                root.display()
+            )));
         }
-        let objects = ObjectList {
-            objects: objects
-                .iter()
-                .enumerate()
-                .map(
-                    |(i, (model, transform))| -> Result<ObjectRecord, WorldError> {
-                        let (hash, _) = stored.get(*model).ok_or_else(|| {
-                            WorldError::Inconsistent(format!(
-                                "object {i} places model {model} of {}",
-                                stored.len()
-                            ))
-                        })?;
-                        Ok(ObjectRecord {
-                            id: i as u32,
-                            model: hash.clone(),
-                            transform: transform.to_cols_array(),
-                        })
-                    },
-                )
-                .collect::<Result<_, _>>()?,
-        };
-        let manifest = WorldManifest {
-            format: FORMAT,
-            name: name.to_owned(),
-            seed,
-            object_count: objects.objects.len(),
-            model_count: records.len(),
-            models: records,
-        };
-        WorldDir::write_json(&dir.objects(), &objects)?;
-        WorldDir::write_json(&dir.manifest(), &manifest)?;
-        Ok(World {
-            dir,
-            manifest,
-            objects,
-            descriptors: DescriptorCache::default(),
-            tree: None,
-        })
+        std::fs::create_dir_all(root).map_err(|e| WorldError::io(root, e))?;
+        let world = Self::open_stores(root, name, seed)?;
+        let stored: Vec<(Vec<u8>, serde_json::Value)> = models
+            .par_iter()
+            .map(|(model_name, mesh)| Ok((normalise(model_name, mesh)?, stats(mesh))))
+            .collect::<Result<_, WorldError>>()?;
+        let mut numbers = Vec::with_capacity(models.len());
+        for ((model_name, _), (glb, stats)) in models.iter().zip(&stored) {
+            let row = world.store_model(glb, glb, model_name, None, stats)?.0;
+            numbers.push(row.number);
+        }
+        let mutations: Vec<Mutation> = objects
+            .iter()
+            .enumerate()
+            .map(|(i, &(model, transform))| {
+                let model = *numbers.get(model).ok_or_else(|| {
+                    WorldError::Inconsistent(format!(
+                        "object {i} places model {model} of {}",
+                        numbers.len()
+                    ))
+                })?;
+                Ok(Mutation::Create { model, transform })
+            })
+            .collect::<Result<_, WorldError>>()?;
+        world.meta.apply(None, &mutations)?;
+        world.refresh_status()?;
+        Ok(world)
     }
 
-    /// Opens the world in `root`: its manifest and objects, checked against each other, and
-    /// the descriptors computed so far.
+    /// Opens the world in `root`. A world of format 1 (the JSON files of earlier versions) is
+    /// upgraded first: its models and objects move into the database and the blob folder.
     pub fn open(root: &Path) -> Result<World, WorldError> {
-        let dir = WorldDir::new(root);
-        let (manifest, objects) = dir.load()?;
-        let descriptors = if dir.descriptors().exists() {
-            WorldDir::read_json(&dir.descriptors())?
-        } else {
-            DescriptorCache::default()
-        };
+        if !root.join("world.db").exists() {
+            if is_legacy(root) {
+                return Self::upgrade(root);
+            }
+            return Err(WorldError::NotAWorld(root.to_path_buf()));
+        }
+        let world = Self::open_stores(root, "", 0)?;
+        world.blobs.sweep()?;
+        world.refresh_status()?;
+        world.remove_orphans()?;
+        Ok(world)
+    }
+
+    /// The stores of `root`, created if missing.
+    fn open_stores(root: &Path, name: &str, seed: u64) -> Result<World, WorldError> {
+        let meta: Arc<dyn MetaStore> =
+            Arc::new(SqliteMeta::open(&root.join("world.db"), name, seed)?);
+        let blobs: Arc<dyn BlobStore> = Arc::new(BlobDir::new(&root.join("blobs")));
+        let models = Models::load(meta.clone(), blobs.clone())?;
         Ok(World {
-            dir,
-            manifest,
-            objects,
-            descriptors,
-            tree: None,
+            root: root.to_path_buf(),
+            meta,
+            blobs,
+            models,
+            limits: UploadLimits::default(),
+            writer: Mutex::new(()),
+            tree: RwLock::new(None),
+            status: Mutex::new(Status::default()),
+            changed: Condvar::new(),
         })
     }
 
-    /// The directory's paths.
-    pub fn dir(&self) -> &WorldDir {
-        &self.dir
+    /// Moves a format-1 world into the database: models re-addressed by BLAKE3, descriptors
+    /// carried over, objects placed in id order. The old files are left as they were.
+    fn upgrade(root: &Path) -> Result<World, WorldError> {
+        let legacy = LegacyWorld::read(root)?;
+        let world = Self::open_stores(root, &legacy.manifest.name, legacy.manifest.seed)?;
+        let mut numbers: HashMap<&str, u64> = HashMap::new();
+        for m in &legacy.manifest.models {
+            let glb = legacy.model_bytes(&m.hash)?;
+            let mesh = horizon_mesh::import_bytes(
+                &glb,
+                horizon_mesh::Format::Glb,
+                None,
+                &horizon_mesh::ImportOptions::trusted(),
+            )
+            .map_err(|e| WorldError::model(&m.name, e))?
+            .mesh;
+            let (row, _) = world.store_model(&glb, &glb, &m.name, None, &stats(&mesh))?;
+            if let Some(d) = legacy.descriptors.get(&m.hash) {
+                world.meta.put_descriptors(&row.asset, d)?;
+            }
+            numbers.insert(m.hash.as_str(), row.number);
+        }
+        let mutations: Vec<Mutation> = legacy
+            .objects
+            .iter()
+            .map(|o| Mutation::Create {
+                model: numbers[o.model.as_str()],
+                transform: Affine3A::from_cols_array(&o.transform),
+            })
+            .collect();
+        world.meta.apply(None, &mutations)?;
+        world.refresh_status()?;
+        Ok(world)
     }
 
-    /// `world.json`.
-    pub fn manifest(&self) -> &WorldManifest {
-        &self.manifest
+    /// Reads the counters the status reports from the stores.
+    fn refresh_status(&self) -> Result<(), WorldError> {
+        let generation = self.meta.generation()?;
+        let published = self.meta.published()?;
+        let objects = self.meta.object_count()?;
+        let snapshot = self.meta.snapshot()?.map_or(0, |s| s.generation);
+        let mut s = self.lock_status()?;
+        s.generation = generation;
+        s.objects = objects;
+        s.snapshot = snapshot;
+        if generation > published.generation && s.first_change.is_none() {
+            // Changes committed before this process started are due at once.
+            s.first_change = Some(Instant::now());
+            s.last_change = Some(Instant::now());
+        }
+        s.published = published;
+        Ok(())
     }
 
-    /// The placed objects, by id.
-    pub fn objects(&self) -> &[ObjectRecord] {
-        &self.objects.objects
+    /// The world's directory.
+    pub fn root(&self) -> &Path {
+        &self.root
     }
 
-    /// The descriptors computed so far, by model hash.
-    pub fn descriptors(&self) -> &DescriptorCache {
-        &self.descriptors
+    /// The world's name and seed.
+    pub fn identity(&self) -> Result<(String, u64), WorldError> {
+        self.meta.identity()
+    }
+
+    /// The limits uploads are held to.
+    pub fn upload_limits(&self) -> UploadLimits {
+        self.limits
+    }
+
+    /// Sets the limits uploads are held to.
+    pub fn set_upload_limits(&mut self, limits: UploadLimits) {
+        self.limits = limits;
+    }
+
+    // ---------------------------------------------------------------------------------------
+    // Models
+    // ---------------------------------------------------------------------------------------
+
+    /// Stores a model: its GLB as a blob, then its row (id: the hash of `source`, the bytes
+    /// it came as). Returns the row and whether it was new.
+    fn store_model(
+        &self,
+        source: &[u8],
+        glb: &[u8],
+        name: &str,
+        owner: Option<&str>,
+        stats: &serde_json::Value,
+    ) -> Result<(ModelRow, bool), WorldError> {
+        let asset = self.blobs.put(glb)?;
+        let id = content_hash(source);
+        let (row, created) = self.meta.add_model(NewModel {
+            id: &id,
+            asset: &asset,
+            name,
+            owner,
+            bytes: glb.len() as u64,
+            stats,
+        })?;
+        if created {
+            self.models.add(row.clone())?;
+        }
+        Ok((row, created))
+    }
+
+    /// Ingests uploaded bytes for `owner`: import under the upload limits, validate,
+    /// normalise, store, describe. The same bytes uploaded again (or concurrently) give the
+    /// same model, stored once: `(row, false)`.
+    pub fn upload_model(
+        &self,
+        bytes: &[u8],
+        name: &str,
+        owner: &str,
+    ) -> Result<(ModelRow, bool), WorldError> {
+        let id = content_hash(bytes);
+        if let Some(row) = self.meta.model(&id)? {
+            return Ok((row, false));
+        }
+        let ingested = import_upload(bytes, &self.limits)?;
+        let glb = normalise(name, &ingested.mesh)?;
+        let asset = content_hash(&glb);
+        if self.meta.descriptors(&asset)?.is_none() {
+            let d = describe_stored(name, &glb)?;
+            self.meta.put_descriptors(&asset, &d)?;
+        }
+        self.store_model(bytes, &glb, name, Some(owner), &stats(&ingested.mesh))
+    }
+
+    /// The model with this id.
+    pub fn model(&self, id: &str) -> Result<Option<ModelRow>, WorldError> {
+        self.meta.model(id)
+    }
+
+    /// Up to `limit` models with ids after `after`, in id order.
+    pub fn models_page(
+        &self,
+        after: Option<&str>,
+        limit: usize,
+    ) -> Result<Vec<ModelRow>, WorldError> {
+        self.meta.models_page(after, limit)
+    }
+
+    /// The models, by number, for the rebuild and the tree.
+    pub fn models(&self) -> &Models {
+        &self.models
     }
 
     /// Describes every model that has no descriptors yet (in parallel, reporting
-    /// `progress(done, total)`), and saves the cache. Returns how many were computed.
+    /// `progress(done, total)`). Returns how many were computed.
     pub fn describe_models(
-        &mut self,
+        &self,
         progress: &(dyn Fn(usize, usize) + Sync),
     ) -> Result<usize, WorldError> {
-        let missing: Vec<&ModelRecord> = self
-            .manifest
-            .models
-            .iter()
-            .filter(|m| !self.descriptors.models.contains_key(&m.hash))
-            .collect();
-        let done = AtomicUsize::new(0);
+        let missing = self.models.undescribed()?;
+        let done = std::sync::atomic::AtomicUsize::new(0);
         progress(0, missing.len());
-        let computed: Vec<(String, ModelDescriptors)> = missing
-            .par_iter()
-            .map(|m| -> Result<(String, ModelDescriptors), WorldError> {
-                let d = describe_stored(&self.dir.model(&m.hash))?;
-                progress(done.fetch_add(1, Ordering::Relaxed) + 1, missing.len());
-                Ok((m.hash.clone(), d))
-            })
-            .collect::<Result<_, _>>()?;
-        let count = computed.len();
-        if count > 0 {
-            self.descriptors.models.extend(computed);
-            WorldDir::write_json(&self.dir.descriptors(), &self.descriptors)?;
-        }
-        Ok(count)
+        missing.par_iter().try_for_each(|&number| {
+            let row = self.models.row(number)?;
+            let glb = self.models.glb(number)?;
+            let d = describe_stored(&row.name, &glb)?;
+            self.meta.put_descriptors(&row.asset, &d)?;
+            let n = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+            progress(n, missing.len());
+            Ok::<(), WorldError>(())
+        })?;
+        Ok(missing.len())
     }
+
+    // ---------------------------------------------------------------------------------------
+    // Objects
+    // ---------------------------------------------------------------------------------------
+
+    /// Applies `changes` for `user` (`None`: the world itself) as one transaction, then puts
+    /// them in the tree. Fails whole, changing nothing, if any change is refused: an unknown
+    /// model or object, another user's object, a quota.
+    pub fn apply(
+        &self,
+        user: Option<&str>,
+        changes: &[Change],
+    ) -> Result<Vec<Applied>, WorldError> {
+        let mutations = changes
+            .iter()
+            .map(|c| match c {
+                Change::Create { model, transform } => {
+                    let row = self
+                        .meta
+                        .model(model)?
+                        .ok_or_else(|| WorldError::UnknownModel(format!("no model {model}")))?;
+                    Ok(Mutation::Create {
+                        model: row.number,
+                        transform: *transform,
+                    })
+                }
+                Change::Move { id, transform } => Ok(Mutation::Move {
+                    id: *id,
+                    transform: *transform,
+                }),
+                Change::Delete { id } => Ok(Mutation::Delete { id: *id }),
+            })
+            .collect::<Result<Vec<_>, WorldError>>()?;
+        let _writer = self.lock_writer()?;
+        self.ensure_tree()?;
+        let applied = self.meta.apply(user, &mutations)?;
+        let mut touched = Vec::new();
+        {
+            let mut tree = self.write_tree()?;
+            if let Some(tree) = tree.as_mut() {
+                for a in &applied {
+                    touched.extend(tree.apply(a, &self.models)?);
+                }
+            }
+        }
+        let mut s = self.lock_status()?;
+        if let Some(last) = applied.last() {
+            s.generation = last.generation;
+            for n in touched {
+                s.dirty.insert(n, last.generation);
+            }
+            let now = Instant::now();
+            s.first_change.get_or_insert(now);
+            s.last_change = Some(now);
+        }
+        for m in &mutations {
+            match m {
+                Mutation::Create { .. } => s.objects += 1,
+                Mutation::Delete { .. } => s.objects = s.objects.saturating_sub(1),
+                Mutation::Move { .. } => {}
+            }
+        }
+        drop(s);
+        self.changed.notify_all();
+        Ok(applied)
+    }
+
+    /// The object with this id.
+    pub fn object(&self, id: u64) -> Result<Option<ObjectRow>, WorldError> {
+        self.meta.object(id)
+    }
+
+    /// Up to `limit` objects with ids after `after` (of `owner`, if given), in id order.
+    pub fn objects_page(
+        &self,
+        after: Option<u64>,
+        limit: usize,
+        owner: Option<&str>,
+    ) -> Result<Vec<ObjectRow>, WorldError> {
+        self.meta.objects_page(after, limit, owner)
+    }
+
+    /// Every object, in id order.
+    pub fn all_objects(&self) -> Result<Vec<ObjectRow>, WorldError> {
+        let mut out = Vec::new();
+        let mut after = None;
+        loop {
+            let page = self.meta.objects_page(after, 100_000, None)?;
+            let Some(last) = page.last() else {
+                return Ok(out);
+            };
+            after = Some(last.id);
+            out.extend(page);
+        }
+    }
+
+    // ---------------------------------------------------------------------------------------
+    // Users
+    // ---------------------------------------------------------------------------------------
+
+    /// Creates a token for `user` (adding the user, or updating their limits): a random
+    /// 256-bit bearer token, returned once as 64 hex digits; only its hash is stored.
+    pub fn create_token(&self, user: &User) -> Result<String, WorldError> {
+        if user.name.is_empty() || user.name.len() > 64 || user.name.chars().any(char::is_control) {
+            return Err(WorldError::Inconsistent(format!(
+                "user name {:?} must be 1 to 64 printable characters",
+                user.name
+            )));
+        }
+        let mut bytes = [0u8; 32];
+        getrandom::fill(&mut bytes)
+            .map_err(|e| WorldError::Inconsistent(format!("no randomness for a token: {e}")))?;
+        let token: String = bytes.iter().map(|b| format!("{b:02x}")).collect();
+        self.meta.add_token(user, &content_hash(token.as_bytes()))?;
+        Ok(token)
+    }
+
+    /// The user a bearer token belongs to.
+    pub fn user_of_token(&self, token: &str) -> Result<Option<User>, WorldError> {
+        self.meta.user_of_token(&content_hash(token.as_bytes()))
+    }
+
+    // ---------------------------------------------------------------------------------------
+    // The tree
+    // ---------------------------------------------------------------------------------------
 
     /// BVH options for this world: eq. 1's `mu` and `w`, and the two descriptor distances
     /// normalised by this world's own scales, the median z_diff and the median t_diff between
     /// its distinct models (every pair up to [`SCALE_ALL_PAIRS_UP_TO`] models, else a seeded
     /// sample). One unit of either term then means "as different as two typical models of
-    /// this world", which keeps shape, texture and volume on comparable footings whatever the
-    /// world. Worlds with fewer than two described models, or whose medians are 0, keep the
-    /// defaults.
-    pub fn bvh_options(&self, mu: f32, w: f32) -> BvhOptions {
+    /// this world". Worlds with fewer than two described models, or whose medians are 0,
+    /// keep the defaults.
+    pub fn bvh_options(&self, mu: f32, w: f32) -> Result<BvhOptions, WorldError> {
         let mut options = BvhOptions::default().with_weights(mu, w);
-        let models: Vec<&ModelDescriptors> = self
-            .manifest
-            .models
-            .iter()
-            .filter_map(|m| self.descriptors.models.get(&m.hash))
-            .collect();
+        let mut seen = HashSet::new();
+        let mut models = Vec::new();
+        for row in self.models.rows()? {
+            if seen.insert(row.asset.clone()) {
+                if let Some(d) = self.meta.descriptors(&row.asset)? {
+                    models.push(d);
+                }
+            }
+        }
         let n = models.len();
         if n < 2 {
-            return options;
+            return Ok(options);
         }
         let pairs: Vec<(usize, usize)> = if n <= SCALE_ALL_PAIRS_UP_TO {
             (0..n)
@@ -259,145 +577,379 @@ impl World {
         if t.is_finite() && t > 0.0 {
             options.texture_scale = t;
         }
-        options
+        Ok(options)
     }
 
-    /// The BVH's input: each object's world bounding sphere (its model's sphere through its
-    /// transform) and its model's descriptors, the model numbered by its place in the
-    /// manifest. Every model must be described.
-    pub fn bvh_input(&self) -> Result<Vec<NewObject<'_>>, WorldError> {
-        let index: HashMap<&str, usize> = self
-            .manifest
-            .models
-            .iter()
-            .enumerate()
-            .map(|(i, m)| (m.hash.as_str(), i))
-            .collect();
-        self.objects
-            .objects
-            .iter()
-            .map(|o| {
-                let d = self.descriptors.models.get(&o.model).ok_or_else(|| {
-                    WorldError::model(&o.model, "no descriptors (run horizon build)")
+    /// Every object as the bulk build takes it: (world id, model number, transform), in id
+    /// order. [`crate::new_object`] makes the BVH's input of one, with the model's
+    /// descriptors ([`Describe`] on [`World::models`]).
+    pub fn bulk_input(&self) -> Result<Vec<(u64, u64, Affine3A)>, WorldError> {
+        Ok(self
+            .all_objects()?
+            .into_iter()
+            .map(|o| (o.id, o.model, o.transform))
+            .collect())
+    }
+
+    /// Bulk-builds the BVH (section 4.3) of every object with eq. 1's `mu` and `w` and this
+    /// world's scales, and snapshots it. Every model must be described. Returns its size.
+    pub fn build_tree(&self, mu: f32, w: f32) -> Result<(usize, usize, u32), WorldError> {
+        let _writer = self.lock_writer()?;
+        let generation = self.meta.generation()?;
+        let tree = Tree::bulk(
+            self.bvh_options(mu, w)?,
+            &self.bulk_input()?,
+            &self.models,
+            generation,
+        )?;
+        let summary = (tree.bvh.len(), tree.bvh.node_count(), tree.bvh.height());
+        self.save_snapshot(&tree)?;
+        *self.write_tree()? = Some(tree);
+        Ok(summary)
+    }
+
+    /// Loads the tree if it is not loaded: its snapshot with the log replayed, or, for a world
+    /// never built, a bulk build with the default weights.
+    pub fn ensure_tree(&self) -> Result<(), WorldError> {
+        if self.read_tree()?.is_some() {
+            return Ok(());
+        }
+        let tree = match self.meta.snapshot()? {
+            Some(snapshot) => {
+                let bytes = self.blobs.get(&snapshot.blob)?.ok_or_else(|| {
+                    WorldError::Inconsistent(format!(
+                        "the tree snapshot {} is missing",
+                        snapshot.blob
+                    ))
                 })?;
-                let t = Affine3A::from_cols_array(&o.transform);
-                let scale = horizon_mesh::transform::max_axis_scale(&t);
-                Ok(NewObject {
-                    model: index[o.model.as_str()] as u64,
-                    transform: t,
-                    sphere: Sphere::new(
-                        t.transform_point3(Vec3::from_array(d.centre)),
-                        d.radius * scale,
-                    ),
-                    shape: &d.zernike,
-                    texture: &d.csd,
-                })
-            })
-            .collect()
-    }
-
-    /// Bulk-builds the BVH (section 4.3) with eq. 1's `mu` and `w` and this world's scales,
-    /// and checks it. Every model must be described.
-    pub fn build_tree(&mut self, mu: f32, w: f32) -> Result<&Bvh, WorldError> {
-        let bvh = Bvh::bulk_build(self.bvh_options(mu, w), &self.bvh_input()?)?;
-        bvh.validate()?;
-        Ok(self.tree.insert(bvh))
-    }
-
-    /// Writes the BVH snapshot, `bvh.json`.
-    pub fn save_tree(&self) -> Result<(), WorldError> {
-        let bvh = self.tree_or_not_built()?;
-        WorldDir::write_json(&self.dir.bvh(), bvh)
-    }
-
-    /// Reads the BVH snapshot a build wrote.
-    pub fn load_tree(&mut self) -> Result<&Bvh, WorldError> {
-        let path = self.dir.bvh();
-        let bvh: Bvh = WorldDir::read_json(&path).map_err(|e| match e {
-            WorldError::Io { source, .. } if source.kind() == std::io::ErrorKind::NotFound => {
-                WorldError::NotBuilt(self.dir.root().to_path_buf())
+                let mut tree = Tree::from_snapshot(&bytes)?;
+                for change in self.meta.log_after(tree.generation)? {
+                    tree.apply(&change, &self.models)?;
+                }
+                tree
             }
-            other => other,
-        })?;
-        Ok(self.tree.insert(bvh))
-    }
-
-    /// The BVH, once built or loaded.
-    pub fn tree(&self) -> Option<&Bvh> {
-        self.tree.as_ref()
-    }
-
-    /// The BVH, to change in place (a benchmark inserting objects).
-    pub fn tree_mut(&mut self) -> Option<&mut Bvh> {
-        self.tree.as_mut()
-    }
-
-    fn tree_or_not_built(&self) -> Result<&Bvh, WorldError> {
-        self.tree
-            .as_ref()
-            .ok_or_else(|| WorldError::NotBuilt(self.dir.root().to_path_buf()))
-    }
-
-    /// Every model of the world imported from its stored GLB and prepared for the rebuild,
-    /// numbered as the BVH numbers them. Every model must be described.
-    pub fn source_models(&self) -> Result<InMemoryModels, WorldError> {
-        let models = self
-            .manifest
-            .models
-            .par_iter()
-            .map(|m| -> Result<SourceModel, WorldError> {
-                let path = self.dir.model(&m.hash);
-                let mesh = import_file(&path, &ImportOptions::default())
-                    .map_err(|e| WorldError::model(path.display().to_string(), e))?
-                    .mesh;
-                let d = self
-                    .descriptors
-                    .models
-                    .get(&m.hash)
-                    .ok_or_else(|| WorldError::model(&m.hash, "no descriptors"))?;
-                Ok(SourceModel::new(
-                    m.hash.clone(),
-                    mesh,
-                    d.zernike.clone(),
-                    d.csd.clone(),
-                ))
-            })
-            .collect::<Result<Vec<_>, _>>()?;
-        Ok(InMemoryModels::new(models))
-    }
-
-    /// The world's aggregate store, `DIR/aggregates`.
-    pub fn aggregate_dir(&self) -> AggregateDir {
-        AggregateDir::new(&self.dir.aggregates())
-    }
-
-    /// The offline rebuild: every node of the BVH gets its aggregate in `DIR/aggregates`
-    /// (nodes whose inputs did not change are reused), then what the new manifest no longer
-    /// names is deleted, so the store holds one build.
-    pub fn rebuild_aggregates(
-        &self,
-        models: &InMemoryModels,
-        options: AggregateOptions,
-        progress: &(dyn Fn(Progress) + Sync),
-    ) -> Result<RebuildReport, WorldError> {
-        let bvh = self.tree_or_not_built()?;
-        let store = self.aggregate_dir();
-        let options = BuildOptions {
-            aggregate: options,
-            world_textures: models.texture_totals(),
+            None if self.meta.object_count()? == 0 => {
+                let mut tree = Tree::empty(
+                    self.bvh_options(horizon_bvh::DEFAULT_MU, horizon_bvh::DEFAULT_W)?,
+                )?;
+                tree.generation = self.meta.generation()?;
+                tree
+            }
+            None => return Err(WorldError::NotBuilt(self.root.clone())),
         };
-        let outcome = build_aggregates(bvh, models, &store, &options, progress)?;
-        let removed = store.collect_garbage(&outcome.manifest)?;
-        Ok(RebuildReport {
-            build: outcome.report,
-            removed,
-        })
+        let mut slot = self.write_tree()?;
+        if slot.is_none() {
+            *slot = Some(tree);
+        }
+        Ok(())
+    }
+
+    /// Runs `f` on the tree (loaded first if need be).
+    pub fn with_tree<T>(&self, f: impl FnOnce(&Tree) -> T) -> Result<T, WorldError> {
+        self.ensure_tree()?;
+        let tree = self.read_tree()?;
+        let tree = tree
+            .as_ref()
+            .ok_or_else(|| WorldError::NotBuilt(self.root.clone()))?;
+        Ok(f(tree))
     }
 
     /// The cut for a viewer (eq. 3): every object subtending at least the query's solid angle
     /// as itself, everything else through exactly one ancestor aggregate, largest solid
     /// angle first under the query's budget.
     pub fn cut(&self, query: &CutQuery) -> Result<Cut, WorldError> {
-        Ok(self.tree_or_not_built()?.cut(query))
+        self.with_tree(|tree| tree.bvh.cut(query))
+    }
+
+    /// Stores `tree` as the snapshot, which lets the log before it go.
+    fn save_snapshot(&self, tree: &Tree) -> Result<(), WorldError> {
+        let blob = self.blobs.put(&tree.to_snapshot()?)?;
+        self.meta.put_snapshot(&Snapshot {
+            generation: tree.generation,
+            blob,
+        })?;
+        self.lock_status()?.snapshot = tree.generation;
+        Ok(())
+    }
+
+    // ---------------------------------------------------------------------------------------
+    // The rebuild
+    // ---------------------------------------------------------------------------------------
+
+    /// The manifest being served.
+    pub fn published_manifest(&self) -> Result<Option<AggregateManifest>, WorldError> {
+        let published = self.lock_status()?.published.clone();
+        self.read_manifest(published.manifest.as_deref())
+    }
+
+    fn read_manifest(&self, hash: Option<&str>) -> Result<Option<AggregateManifest>, WorldError> {
+        let Some(hash) = hash else {
+            return Ok(None);
+        };
+        let bytes = self.blobs.get(hash)?.ok_or_else(|| {
+            WorldError::Inconsistent(format!("the published manifest {hash} is missing"))
+        })?;
+        serde_json::from_slice(&bytes)
+            .map(Some)
+            .map_err(|e| WorldError::Inconsistent(format!("manifest {hash}: {e}")))
+    }
+
+    /// The rebuild: a copy of the tree at the current generation gets every node's aggregate
+    /// (nodes whose inputs did not change are reused), the new manifest is published as one
+    /// step, and blobs that neither it nor the manifest before it names go. Changes committed
+    /// during the build stay dirty for the next one.
+    pub fn rebuild_aggregates(
+        &self,
+        options: AggregateOptions,
+        progress: &(dyn Fn(Progress) + Sync),
+    ) -> Result<RebuildReport, WorldError> {
+        self.ensure_tree()?;
+        let started = Instant::now();
+        let tree = self
+            .read_tree()?
+            .clone()
+            .ok_or_else(|| WorldError::NotBuilt(self.root.clone()))?;
+        let generation = tree.generation;
+        let previous = self.lock_status()?.published.clone();
+        let sink = AggregateSink::new(
+            self.meta.as_ref(),
+            self.blobs.as_ref(),
+            self.read_manifest(previous.manifest.as_deref())?,
+        );
+        let build = BuildOptions {
+            aggregate: options,
+            world_textures: self.models.texture_totals()?,
+        };
+        let outcome = build_aggregates(&tree.bvh, &self.models, &sink, &build, progress)?;
+        let manifest_bytes = serde_json::to_vec(&outcome.manifest)
+            .map_err(|e| WorldError::Inconsistent(e.to_string()))?;
+        let manifest = self.blobs.put(&manifest_bytes)?;
+        let published = Published {
+            generation,
+            manifest: Some(manifest.clone()),
+            previous_manifest: previous.manifest.filter(|m| *m != manifest),
+            rebuild_ms: Some(started.elapsed().as_millis() as u64),
+        };
+        self.meta.publish(&published)?;
+        {
+            let mut s = self.lock_status()?;
+            s.published = published.clone();
+            s.dirty.retain(|_, g| *g > generation);
+            if s.generation <= generation {
+                s.first_change = None;
+                s.last_change = None;
+            } else {
+                s.first_change = s.last_change;
+            }
+        }
+        self.changed.notify_all();
+        let removed_blobs = self.collect_garbage(&outcome.manifest, &published)?;
+        if generation.saturating_sub(self.lock_status()?.snapshot) >= SNAPSHOT_EVERY {
+            self.save_snapshot(&tree)?;
+        }
+        Ok(RebuildReport {
+            build: outcome.report,
+            generation,
+            removed_blobs,
+        })
+    }
+
+    /// Deletes the aggregate blobs and entries that neither the published manifest nor the
+    /// one before it names (clients may still fetch what the one before named). Models,
+    /// manifests and snapshots are never collected here.
+    fn collect_garbage(
+        &self,
+        current: &AggregateManifest,
+        published: &Published,
+    ) -> Result<usize, WorldError> {
+        let mut keep = named_blobs(current);
+        let mut keys: Vec<String> = current.nodes.values().map(|e| e.key.clone()).collect();
+        if let Some(previous) = self.read_manifest(published.previous_manifest.as_deref())? {
+            keep.extend(named_blobs(&previous));
+            keys.extend(previous.nodes.values().map(|e| e.key.clone()));
+        }
+        let mut removed = 0;
+        for entry in recorded_entries(self.meta.as_ref())? {
+            for hash in std::iter::once(&entry.glb).chain(entry.parts.as_ref()) {
+                if !keep.contains(hash) && self.blobs.size(hash)?.is_some() {
+                    self.blobs.delete(hash)?;
+                    keep.insert(hash.clone());
+                    removed += 1;
+                }
+            }
+        }
+        self.meta.retain_aggregate_entries(&keys)?;
+        Ok(removed)
+    }
+
+    /// Deletes every blob nothing refers to: not a model, not named by a recorded aggregate
+    /// entry (a build that stopped before publishing is reused from them) or a published
+    /// manifest, not a manifest or the tree snapshot. Such blobs are what an interrupted write
+    /// leaves; they are only looked for at open, before any upload can be between storing its
+    /// blob and recording its model.
+    fn remove_orphans(&self) -> Result<usize, WorldError> {
+        let published = self.meta.published()?;
+        let mut keep: HashSet<String> = self.models.rows()?.into_iter().map(|r| r.asset).collect();
+        for manifest in [&published.manifest, &published.previous_manifest]
+            .into_iter()
+            .flatten()
+        {
+            keep.insert(manifest.clone());
+            if let Some(m) = self.read_manifest(Some(manifest))? {
+                keep.extend(named_blobs(&m));
+            }
+        }
+        if let Some(snapshot) = self.meta.snapshot()? {
+            keep.insert(snapshot.blob);
+        }
+        for entry in recorded_entries(self.meta.as_ref())? {
+            keep.insert(entry.glb);
+            keep.extend(entry.parts);
+        }
+        let mut removed = 0;
+        for hash in self.blobs.list()? {
+            if !keep.contains(&hash) {
+                self.blobs.delete(&hash)?;
+                removed += 1;
+            }
+        }
+        Ok(removed)
+    }
+
+    /// Forgets every aggregate: their entries, their blobs and the published manifests, so
+    /// that the next rebuild builds everything from scratch (what a benchmark of a full build
+    /// needs). Clients get no aggregates until then.
+    pub fn forget_aggregates(&self) -> Result<(), WorldError> {
+        let published = self.meta.published()?;
+        let mut hashes: HashSet<String> = HashSet::new();
+        for entry in recorded_entries(self.meta.as_ref())? {
+            hashes.insert(entry.glb);
+            hashes.extend(entry.parts);
+        }
+        hashes.extend(published.manifest.clone());
+        hashes.extend(published.previous_manifest.clone());
+        let unpublished = Published {
+            generation: 0,
+            manifest: None,
+            previous_manifest: None,
+            rebuild_ms: None,
+        };
+        self.meta.publish(&unpublished)?;
+        self.lock_status()?.published = unpublished;
+        self.meta.retain_aggregate_entries(&[])?;
+        let models: HashSet<String> = self.models.rows()?.into_iter().map(|r| r.asset).collect();
+        for hash in hashes.difference(&models) {
+            self.blobs.delete(hash)?;
+        }
+        Ok(())
+    }
+
+    /// Blocks until a rebuild is due under the debounce (`quiet` after the last change, and
+    /// at most `max_wait` after the first), or `timeout` passes, or `stop` says so. Returns
+    /// whether a rebuild is due.
+    pub fn wait_for_rebuild(
+        &self,
+        quiet: Duration,
+        max_wait: Duration,
+        timeout: Duration,
+        stop: &dyn Fn() -> bool,
+    ) -> Result<bool, WorldError> {
+        let deadline = Instant::now() + timeout;
+        let mut s = self.lock_status()?;
+        loop {
+            if stop() {
+                return Ok(false);
+            }
+            let now = Instant::now();
+            let due = match (s.first_change, s.last_change) {
+                (Some(first), Some(last)) => {
+                    let at = (last + quiet).min(first + max_wait);
+                    if now >= at {
+                        return Ok(true);
+                    }
+                    Some(at)
+                }
+                _ => None,
+            };
+            if now >= deadline {
+                return Ok(false);
+            }
+            let until = due.map_or(deadline, |at| at.min(deadline));
+            s = self
+                .changed
+                .wait_timeout(s, until.saturating_duration_since(now))
+                .map_err(|_| WorldError::Inconsistent("status lock poisoned".into()))?
+                .0;
+        }
+    }
+
+    /// Wakes anything waiting in [`World::wait_for_rebuild`] (to see a stop).
+    pub fn wake(&self) {
+        self.changed.notify_all();
+    }
+
+    /// The world's counters.
+    pub fn status(&self) -> Result<WorldStatus, WorldError> {
+        let bounds = self
+            .read_tree()?
+            .as_ref()
+            .and_then(|t| t.bvh.node(t.bvh.root()).map(|n| n.aabb()));
+        let s = self.lock_status()?;
+        Ok(WorldStatus {
+            generation: s.generation,
+            published: s.published.generation,
+            objects: s.objects,
+            models: self.models.len() as u64,
+            dirty_nodes: s.dirty.len() as u64,
+            last_rebuild_ms: s.published.rebuild_ms,
+            bounds,
+        })
+    }
+
+    // ---------------------------------------------------------------------------------------
+    // Blobs
+    // ---------------------------------------------------------------------------------------
+
+    /// The blob named `hash`, if stored.
+    pub fn blob(&self, hash: &str) -> Result<Option<Vec<u8>>, WorldError> {
+        self.blobs.get(hash)
+    }
+
+    /// The metadata store.
+    pub fn meta(&self) -> &dyn MetaStore {
+        self.meta.as_ref()
+    }
+
+    /// The blob store.
+    pub fn blobs(&self) -> &dyn BlobStore {
+        self.blobs.as_ref()
+    }
+
+    // ---------------------------------------------------------------------------------------
+    // Locks
+    // ---------------------------------------------------------------------------------------
+
+    fn lock_writer(&self) -> Result<MutexGuard<'_, ()>, WorldError> {
+        self.writer
+            .lock()
+            .map_err(|_| WorldError::Inconsistent("writer lock poisoned".into()))
+    }
+
+    fn lock_status(&self) -> Result<MutexGuard<'_, Status>, WorldError> {
+        self.status
+            .lock()
+            .map_err(|_| WorldError::Inconsistent("status lock poisoned".into()))
+    }
+
+    fn read_tree(&self) -> Result<std::sync::RwLockReadGuard<'_, Option<Tree>>, WorldError> {
+        self.tree
+            .read()
+            .map_err(|_| WorldError::Inconsistent("tree lock poisoned".into()))
+    }
+
+    fn write_tree(&self) -> Result<std::sync::RwLockWriteGuard<'_, Option<Tree>>, WorldError> {
+        self.tree
+            .write()
+            .map_err(|_| WorldError::Inconsistent("tree lock poisoned".into()))
     }
 }

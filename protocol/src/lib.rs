@@ -1,0 +1,29 @@
+//! Horizon's wire types (`DESIGN.md`, "Service contract (v1)"): one serde type per request,
+//! response and error of the service, shared by the server, the clients and the lab. JSON
+//! everywhere. This crate depends on serde alone (and utoipa behind the `openapi` feature, for
+//! the server's OpenAPI document), so it also builds for wasm.
+//!
+//! # Layout
+//! - `error.rs`: [`ErrorBody`] and [`ErrorCode`], with each code's HTTP status.
+//! - `world.rs`: [`WorldInfo`], what `GET /v1/world` answers.
+//! - `models.rs`: [`ModelInfo`] and its page.
+//! - `objects.rs`: [`NewObject`], [`ObjectPatch`], [`ObjectInfo`], the batch and pages.
+
+mod error;
+mod models;
+mod objects;
+mod world;
+
+pub use error::{ErrorBody, ErrorCode, ErrorDetail};
+pub use models::{ModelInfo, ModelPage};
+pub use objects::{
+    BatchOp, BatchRequest, BatchResponse, Created, Deleted, NewObject, ObjectInfo, ObjectPage,
+    ObjectPatch, Scale,
+};
+pub use world::{Bounds, WorldInfo};
+
+/// The default size of a page of `GET /v1/objects` and `GET /v1/models`.
+pub const DEFAULT_PAGE: usize = 1_000;
+
+/// The largest page a client may ask for.
+pub const MAX_PAGE: usize = 10_000;

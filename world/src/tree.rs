@@ -1,0 +1,202 @@
+//! [`Tree`]: the world's similarity-aware BVH with the map between the world's object ids and
+//! the tree's, the generation it holds every change up to, and its snapshot.
+//!
+//! The tree is derived state. A snapshot (zstd-compressed JSON, a blob) holds it at some
+//! generation, and the metadata store's log holds every committed change after that; the
+//! tree at any generation is the snapshot with the log replayed in order. Insertion (eq. 1),
+//! moves and removals are deterministic, so the replayed tree is the very tree the live world
+//! held: the same nodes, hence the same aggregate keys, so nothing built is rebuilt after a
+//! restart.
+
+use std::collections::{BTreeMap, HashMap};
+
+use glam::{Affine3A, Vec3};
+use horizon_bvh::{Bvh, NewObject, NodeId, ObjectId, Sphere};
+use serde::{Deserialize, Serialize};
+
+use crate::error::WorldError;
+use crate::store::{Applied, ModelDescriptors};
+
+/// zstd level of snapshots: fast, and JSON of descriptors compresses well at any level.
+const SNAPSHOT_LEVEL: i32 = 3;
+
+/// The BVH and its id maps (see the module docs).
+#[derive(Clone, Debug)]
+pub struct Tree {
+    /// The hierarchy.
+    pub bvh: Bvh,
+    /// The generation the tree holds every change up to.
+    pub generation: u64,
+    /// World object id -> tree object id.
+    ids: BTreeMap<u64, ObjectId>,
+    /// Tree object id -> world object id.
+    back: HashMap<ObjectId, u64>,
+}
+
+/// What a snapshot stores.
+#[derive(Serialize, Deserialize)]
+struct Stored {
+    bvh: Bvh,
+    generation: u64,
+    ids: Vec<(u64, ObjectId)>,
+}
+
+/// A model's sphere and descriptors, as the tree takes them.
+pub trait Describe {
+    /// The descriptors of the model numbered `model`.
+    fn descriptors_of(&self, model: u64) -> Result<std::sync::Arc<ModelDescriptors>, WorldError>;
+}
+
+impl Tree {
+    /// A tree over `objects` (world id, model number, transform), bulk-built (core paper
+    /// section 4.3) with `options` at `generation`.
+    pub fn bulk(
+        options: horizon_bvh::BvhOptions,
+        objects: &[(u64, u64, Affine3A)],
+        descriptors: &dyn Describe,
+        generation: u64,
+    ) -> Result<Self, WorldError> {
+        let described: Vec<std::sync::Arc<ModelDescriptors>> = objects
+            .iter()
+            .map(|&(_, model, _)| descriptors.descriptors_of(model))
+            .collect::<Result<_, _>>()?;
+        let input: Vec<NewObject<'_>> = objects
+            .iter()
+            .zip(&described)
+            .map(|(&(_, model, transform), d)| new_object(model, transform, d))
+            .collect();
+        let bvh = Bvh::bulk_build(options, &input)?;
+        bvh.validate()?;
+        // bulk_build numbers objects 0.. in input order.
+        let ids = objects
+            .iter()
+            .enumerate()
+            .map(|(i, &(id, _, _))| (id, ObjectId(i as u32)))
+            .collect();
+        Ok(Self::with_ids(bvh, generation, ids))
+    }
+
+    /// An empty tree with `options`.
+    pub fn empty(options: horizon_bvh::BvhOptions) -> Result<Self, WorldError> {
+        Ok(Self::with_ids(Bvh::new(options)?, 0, BTreeMap::new()))
+    }
+
+    fn with_ids(bvh: Bvh, generation: u64, ids: BTreeMap<u64, ObjectId>) -> Self {
+        let back = ids.iter().map(|(&w, &t)| (t, w)).collect();
+        Self {
+            bvh,
+            generation,
+            ids,
+            back,
+        }
+    }
+
+    /// Applies one committed change; returns the nodes whose contents it changed (the
+    /// ancestors of where the object was and where it is now).
+    pub fn apply(
+        &mut self,
+        change: &Applied,
+        descriptors: &dyn Describe,
+    ) -> Result<Vec<NodeId>, WorldError> {
+        if change.generation <= self.generation {
+            return Ok(Vec::new());
+        }
+        let mut touched = Vec::new();
+        if let Some(&old) = self.ids.get(&change.object) {
+            touched.extend(self.ancestors(old));
+        }
+        match (change.state, self.ids.get(&change.object).copied()) {
+            (Some((model, transform)), None) => {
+                let d = descriptors.descriptors_of(model)?;
+                let id = self.bvh.insert(&new_object(model, transform, &d))?;
+                self.ids.insert(change.object, id);
+                self.back.insert(id, change.object);
+                touched.extend(self.ancestors(id));
+            }
+            (Some((model, transform)), Some(id)) => {
+                let d = descriptors.descriptors_of(model)?;
+                let sphere = sphere_of(transform, &d);
+                self.bvh.move_object(id, transform, sphere)?;
+                touched.extend(self.ancestors(id));
+            }
+            (None, Some(id)) => {
+                self.bvh.remove(id)?;
+                self.ids.remove(&change.object);
+                self.back.remove(&id);
+            }
+            (None, None) => {
+                return Err(WorldError::Inconsistent(format!(
+                    "the log deletes object {}, which the tree does not hold",
+                    change.object
+                )))
+            }
+        }
+        self.generation = change.generation;
+        touched.sort_unstable();
+        touched.dedup();
+        Ok(touched)
+    }
+
+    /// The tree id of a world object.
+    pub fn tree_id(&self, object: u64) -> Option<ObjectId> {
+        self.ids.get(&object).copied()
+    }
+
+    /// The world id of a tree object.
+    pub fn world_id(&self, object: ObjectId) -> Option<u64> {
+        self.back.get(&object).copied()
+    }
+
+    /// The nodes from `object`'s leaf up to the root.
+    fn ancestors(&self, object: ObjectId) -> Vec<NodeId> {
+        let mut out = Vec::new();
+        let mut at = self.bvh.object(object).map(|o| o.leaf());
+        while let Some(n) = at {
+            out.push(n);
+            at = self.bvh.node(n).and_then(|r| r.parent());
+        }
+        out
+    }
+
+    /// The snapshot's bytes.
+    pub fn to_snapshot(&self) -> Result<Vec<u8>, WorldError> {
+        let stored = Stored {
+            bvh: self.bvh.clone(),
+            generation: self.generation,
+            ids: self.ids.iter().map(|(&w, &t)| (w, t)).collect(),
+        };
+        let json = serde_json::to_vec(&stored)
+            .map_err(|e| WorldError::Inconsistent(format!("the tree does not serialise: {e}")))?;
+        zstd::bulk::compress(&json, SNAPSHOT_LEVEL)
+            .map_err(|e| WorldError::Inconsistent(format!("the tree does not compress: {e}")))
+    }
+
+    /// A tree from a snapshot's bytes (checked with `Bvh::validate` as it is read).
+    pub fn from_snapshot(bytes: &[u8]) -> Result<Self, WorldError> {
+        let corrupt = |reason: String| WorldError::Inconsistent(format!("tree snapshot: {reason}"));
+        let json = zstd::stream::decode_all(bytes).map_err(|e| corrupt(e.to_string()))?;
+        let stored: Stored = serde_json::from_slice(&json).map_err(|e| corrupt(e.to_string()))?;
+        let ids = stored.ids.into_iter().collect();
+        Ok(Self::with_ids(stored.bvh, stored.generation, ids))
+    }
+}
+
+/// A placed model's world bounding sphere: its model sphere through its transform.
+pub fn sphere_of(transform: Affine3A, d: &ModelDescriptors) -> Sphere {
+    let scale = horizon_mesh::transform::max_axis_scale(&transform);
+    Sphere::new(
+        transform.transform_point3(Vec3::from_array(d.centre)),
+        d.radius * scale,
+    )
+}
+
+/// A placed model as the BVH takes it: its number, transform, world sphere and descriptors.
+pub fn new_object<'a>(model: u64, transform: Affine3A, d: &'a ModelDescriptors) -> NewObject<'a> {
+    NewObject {
+        model,
+        transform,
+        sphere: sphere_of(transform, d),
+        shape: &d.zernike,
+        texture: &d.csd,
+    }
+}
