@@ -7,16 +7,17 @@
 //! - `simplify_cmd.rs`: `horizon simplify`.
 //! - `descriptors_cmd.rs`: `horizon descriptors`.
 //! - `world_cmd.rs`: `horizon build` and `cut`, over a world directory.
-//! - `demo.rs`: `horizon demo`, the main job on embedded models and the generated village.
+//! - `serve_cmd.rs`: `horizon serve`, `token create` and `demo` (the village, served).
 //!
 //! Workloads, benchmarks and research tools are in `horizon-lab` (the `lab/` crate).
 
-mod demo;
 mod descriptors_cmd;
 mod mesh_cmd;
+mod serve_cmd;
 mod simplify_cmd;
 mod world_cmd;
 
+use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -121,11 +122,48 @@ enum Command {
         #[arg(long)]
         explain: bool,
     },
-    /// Runs the main job on the embedded default models and writes the results to a folder.
+    /// Serves a world: model uploads, objects, assets and the live rebuild over HTTP. Prints
+    /// `listening on http://ADDR` first; stops on SIGTERM or Ctrl-C.
+    Serve {
+        /// The world directory (a missing or empty one starts an empty world).
+        dir: PathBuf,
+        /// Address to listen on (port 0: any free port).
+        #[arg(long, default_value = "127.0.0.1:8080")]
+        listen: SocketAddr,
+    },
+    /// Bearer tokens for writing to a world.
+    #[command(subcommand)]
+    Token(TokenCommand),
+    /// Serves the village: generated and built into the data folder on first run.
     Demo {
-        /// Where to write the demo's output.
+        /// The data folder.
         #[arg(long, default_value = "horizon-demo")]
-        out: PathBuf,
+        data: PathBuf,
+        /// Address to listen on (port 0: any free port).
+        #[arg(long, default_value = "127.0.0.1:8080")]
+        listen: SocketAddr,
+    },
+}
+
+#[derive(Debug, Subcommand)]
+enum TokenCommand {
+    /// Creates a random 256-bit token for a user (adding the user, or setting their quotas)
+    /// and prints it once; only its hash is stored. Works while a server runs on the world.
+    Create {
+        /// The world directory.
+        dir: PathBuf,
+        /// The user the token writes as.
+        #[arg(long)]
+        user: String,
+        /// Most objects the user may own at once.
+        #[arg(long)]
+        max_objects: Option<u64>,
+        /// Most bytes of models the user may upload.
+        #[arg(long)]
+        max_bytes: Option<u64>,
+        /// Print {"token", "user"} as JSON.
+        #[arg(long)]
+        json: bool,
     },
 }
 
@@ -237,7 +275,15 @@ fn main() -> ExitCode {
             json,
             explain,
         } => world_cmd::cut(&dir, &pos, min_solid_angle, max_results, json, explain),
-        Command::Demo { out } => demo::run(&out),
+        Command::Serve { dir, listen } => serve_cmd::serve(&dir, listen),
+        Command::Token(TokenCommand::Create {
+            dir,
+            user,
+            max_objects,
+            max_bytes,
+            json,
+        }) => serve_cmd::create_token(&dir, &user, max_objects, max_bytes, json),
+        Command::Demo { data, listen } => serve_cmd::demo(&data, listen),
     };
     horizon_server::terminal::finish("horizon", result)
 }

@@ -209,6 +209,23 @@ impl World {
         Ok(world)
     }
 
+    /// Opens the world in `root`, or starts an empty one there (named after the folder) if
+    /// `root` is missing or empty.
+    pub fn open_or_create(root: &Path) -> Result<World, WorldError> {
+        let empty = match std::fs::read_dir(root) {
+            Ok(mut entries) => entries.next().is_none(),
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => true,
+            Err(e) => return Err(WorldError::io(root, e)),
+        };
+        if !empty {
+            return Self::open(root);
+        }
+        let name = root
+            .file_name()
+            .map_or_else(|| "world".to_owned(), |n| n.to_string_lossy().into_owned());
+        Self::create(root, &name, 0, &[], &[])
+    }
+
     /// The stores of `root`, created if missing.
     fn open_stores(root: &Path, name: &str, seed: u64) -> Result<World, WorldError> {
         let meta: Arc<dyn MetaStore> =
@@ -893,6 +910,7 @@ impl World {
         let bounds = self
             .read_tree()?
             .as_ref()
+            .filter(|t| !t.bvh.is_empty())
             .and_then(|t| t.bvh.node(t.bvh.root()).map(|n| n.aabb()));
         let s = self.lock_status()?;
         Ok(WorldStatus {

@@ -1,0 +1,269 @@
+//! The world service (`DESIGN.md`, "Service contract (v1)"): [`app`] builds the router over a
+//! shared [`AppState`], and [`run`] serves it on a listener, with the rebuild worker beside
+//! it, until a shutdown signal.
+//!
+//! # Layout
+//! - `mod.rs`: [`Config`], [`AppState`], [`app`], [`run`], the middleware stack (request ids,
+//!   tracing, compression, timeouts, metrics).
+//! - `error.rs`: [`AppError`], every failure as the contract's JSON error.
+//! - `auth.rs`: bearer tokens.
+//! - `routes/`: one file per resource: `world.rs`, `models.rs`, `objects.rs`, `assets.rs`,
+//!   `meta.rs` (health, metrics, OpenAPI, the index page).
+//! - `rebuild.rs`: the background worker that debounces changes and publishes generations.
+
+mod auth;
+mod error;
+mod rebuild;
+mod routes;
+
+use std::future::Future;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, OnceLock};
+use std::time::{Duration, Instant};
+
+use axum::extract::{MatchedPath, Request, State};
+use axum::http::{HeaderName, HeaderValue};
+use axum::middleware::{self, Next};
+use axum::response::Response;
+use axum::Router;
+use horizon_aggregate::AggregateOptions;
+use horizon_world::World;
+use metrics_exporter_prometheus::{PrometheusBuilder, PrometheusHandle};
+use tokio::net::TcpListener;
+use tower_http::compression::predicate::{DefaultPredicate, Predicate};
+use tower_http::compression::CompressionLayer;
+use tower_http::request_id::{
+    MakeRequestId, PropagateRequestIdLayer, RequestId, SetRequestIdLayer,
+};
+use tower_http::timeout::TimeoutLayer;
+use tower_http::trace::TraceLayer;
+use utoipa::OpenApi;
+
+pub use error::{AppError, AppResult};
+pub use rebuild::Rebuilder;
+
+/// How the service runs. Start from [`Config::default`].
+#[derive(Clone, Debug)]
+pub struct Config {
+    /// Largest request body, bytes. Default 64 MiB (a model upload).
+    pub body_limit: usize,
+    /// Longest a request may take before it is answered with 503. Default 60 s.
+    pub request_timeout: Duration,
+    /// Quiet time after the last change before a rebuild starts. Default 250 ms.
+    pub debounce_quiet: Duration,
+    /// Longest a change waits for its rebuild. Default 2 s.
+    pub debounce_max: Duration,
+    /// The options every aggregate is built with.
+    pub aggregates: AggregateOptions,
+    /// Whether `run` starts the rebuild worker. Default true.
+    pub rebuild: bool,
+}
+
+impl Default for Config {
+    fn default() -> Self {
+        Self {
+            body_limit: 64 << 20,
+            request_timeout: Duration::from_secs(60),
+            debounce_quiet: Duration::from_millis(250),
+            debounce_max: Duration::from_secs(2),
+            aggregates: AggregateOptions::default(),
+            rebuild: true,
+        }
+    }
+}
+
+/// What every handler shares: the world, the configuration, the metrics.
+#[derive(Clone, Debug)]
+pub struct AppState {
+    inner: Arc<Inner>,
+}
+
+#[derive(Debug)]
+struct Inner {
+    world: Arc<World>,
+    config: Config,
+    metrics: PrometheusHandle,
+}
+
+impl AppState {
+    /// The state of a service over `world`.
+    pub fn new(world: Arc<World>, config: Config) -> Self {
+        Self {
+            inner: Arc::new(Inner {
+                world,
+                config,
+                metrics: prometheus(),
+            }),
+        }
+    }
+
+    /// The world.
+    pub fn world(&self) -> &Arc<World> {
+        &self.inner.world
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &Config {
+        &self.inner.config
+    }
+
+    /// Runs blocking work (the database, ingest, the tree) off the async runtime.
+    pub async fn blocking<T, F>(&self, f: F) -> AppResult<T>
+    where
+        T: Send + 'static,
+        F: FnOnce(&World) -> Result<T, horizon_world::WorldError> + Send + 'static,
+    {
+        let world = self.inner.world.clone();
+        Ok(tokio::task::spawn_blocking(move || f(&world)).await??)
+    }
+}
+
+/// The process's one Prometheus recorder (metrics are process-global).
+fn prometheus() -> PrometheusHandle {
+    static HANDLE: OnceLock<PrometheusHandle> = OnceLock::new();
+    HANDLE
+        .get_or_init(|| {
+            let recorder = PrometheusBuilder::new().build_recorder();
+            let handle = recorder.handle();
+            // Another recorder installed first (a test harness) keeps its place; this one
+            // then renders what it records itself, which is nothing.
+            let _ = metrics::set_global_recorder(recorder);
+            handle
+        })
+        .clone()
+}
+
+/// The OpenAPI document's root; the routes add their paths (`routes::meta::document`).
+#[derive(OpenApi)]
+#[openapi(info(
+    title = "Horizon",
+    description = "A world server for large user-generated 3D worlds: upload models, place \
+                   objects, and fetch immutable, content-addressed assets."
+))]
+pub(crate) struct ApiDoc;
+
+/// The service's router over `state` (see the module docs for the middleware).
+pub fn app(state: AppState) -> Router {
+    let (router, _) = routes::router().split_for_parts();
+    let timeout = state.config().request_timeout;
+    router
+        .fallback(routes::meta::not_found)
+        .with_state(state.clone())
+        .layer(middleware::from_fn_with_state(state, record_metrics))
+        .layer(
+            CompressionLayer::new()
+                .zstd(true)
+                .gzip(true)
+                .compress_when(DefaultPredicate::new().and(NotPartial)),
+        )
+        .layer(TimeoutLayer::with_status_code(
+            axum::http::StatusCode::SERVICE_UNAVAILABLE,
+            timeout,
+        ))
+        .layer(PropagateRequestIdLayer::new(REQUEST_ID.clone()))
+        .layer(
+            TraceLayer::new_for_http().make_span_with(|request: &Request| {
+                let id = request
+                    .headers()
+                    .get(&REQUEST_ID)
+                    .and_then(|v| v.to_str().ok())
+                    .unwrap_or("-");
+                tracing::info_span!("request", id, method = %request.method(), uri = %request.uri())
+            }),
+        )
+        .layer(SetRequestIdLayer::new(
+            REQUEST_ID.clone(),
+            Counter::default(),
+        ))
+}
+
+/// The header that carries a request's id, set when the client sent none.
+static REQUEST_ID: HeaderName = HeaderName::from_static("x-request-id");
+
+/// Request ids: a process-unique counter, so that log lines and responses can be matched.
+#[derive(Clone, Debug, Default)]
+struct Counter(Arc<AtomicU64>);
+
+impl MakeRequestId for Counter {
+    fn make_request_id<B>(&mut self, _: &axum::http::Request<B>) -> Option<RequestId> {
+        let n = self.0.fetch_add(1, Ordering::Relaxed) + 1;
+        HeaderValue::from_str(&n.to_string())
+            .ok()
+            .map(RequestId::new)
+    }
+}
+
+/// Partial responses are sent as the bytes they name, never re-encoded.
+#[derive(Clone, Copy, Debug)]
+struct NotPartial;
+
+impl Predicate for NotPartial {
+    fn should_compress<B>(&self, response: &axum::http::Response<B>) -> bool
+    where
+        B: axum::body::HttpBody,
+    {
+        response.status() != axum::http::StatusCode::PARTIAL_CONTENT
+    }
+}
+
+/// Counts requests and times them by route and status.
+async fn record_metrics(State(_): State<AppState>, request: Request, next: Next) -> Response {
+    let route = request
+        .extensions()
+        .get::<MatchedPath>()
+        .map_or("unmatched".to_owned(), |m| m.as_str().to_owned());
+    let method = request.method().to_string();
+    let started = Instant::now();
+    let response = next.run(request).await;
+    let status = response.status().as_u16().to_string();
+    let labels = [("route", route), ("method", method), ("status", status)];
+    metrics::counter!("horizon_requests_total", &labels).increment(1);
+    metrics::histogram!("horizon_request_seconds", &labels).record(started.elapsed().as_secs_f64());
+    response
+}
+
+/// Serves `state` on `listener` until `shutdown` completes: the rebuild worker runs beside
+/// the server (if the configuration asks for it); on shutdown the server stops accepting,
+/// finishes the requests in flight, and the worker stops at its next safe point.
+pub async fn run(
+    listener: TcpListener,
+    state: AppState,
+    shutdown: impl Future<Output = ()> + Send + 'static,
+) -> std::io::Result<()> {
+    let rebuilder = state
+        .config()
+        .rebuild
+        .then(|| Rebuilder::spawn(state.world().clone(), state.config().clone()));
+    let served = axum::serve(listener, app(state))
+        .with_graceful_shutdown(shutdown)
+        .await;
+    if let Some(r) = rebuilder {
+        tokio::task::spawn_blocking(move || r.stop())
+            .await
+            .map_err(std::io::Error::other)?;
+    }
+    served
+}
+
+/// Completes on SIGTERM or Ctrl-C.
+pub async fn shutdown_signal() {
+    let ctrl_c = async {
+        let _ = tokio::signal::ctrl_c().await;
+    };
+    #[cfg(unix)]
+    let terminate = async {
+        match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
+            Ok(mut s) => {
+                s.recv().await;
+            }
+            Err(_) => std::future::pending::<()>().await,
+        }
+    };
+    #[cfg(not(unix))]
+    let terminate = std::future::pending::<()>();
+    tokio::select! {
+        () = ctrl_c => {},
+        () = terminate => {},
+    }
+    tracing::info!("shutting down");
+}

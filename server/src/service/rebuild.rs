@@ -1,0 +1,101 @@
+//! [`Rebuilder`]: the live rebuild. A thread of its own, off the async runtime, waits for
+//! changes, debounces them (the quiet time after the last change, at most the longest wait
+//! after the first), then rebuilds the aggregates of what changed and publishes the
+//! generation it built (`World::rebuild_aggregates`, which uses every core). Changes made
+//! during a build stay dirty and start the next one. A failed build is logged and retried at
+//! the next change; a stop takes effect between builds, and whatever a build had committed
+//! before the process ended is reused by the next.
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use horizon_world::World;
+
+use super::Config;
+
+/// The running worker (see the module docs).
+#[derive(Debug)]
+pub struct Rebuilder {
+    world: Arc<World>,
+    stop: Arc<AtomicBool>,
+    thread: Option<JoinHandle<()>>,
+}
+
+impl Rebuilder {
+    /// Starts the worker over `world`.
+    pub fn spawn(world: Arc<World>, config: Config) -> Self {
+        let stop = Arc::new(AtomicBool::new(false));
+        let thread = {
+            let (world, stop) = (world.clone(), stop.clone());
+            std::thread::Builder::new()
+                .name("horizon-rebuild".into())
+                .spawn(move || work(&world, &config, &stop))
+                .ok()
+        };
+        if thread.is_none() {
+            tracing::error!("the rebuild worker could not start; generations will not publish");
+        }
+        Self {
+            world,
+            stop,
+            thread,
+        }
+    }
+
+    /// Stops the worker after the build under way, if any, and waits for it.
+    pub fn stop(mut self) {
+        self.stop.store(true, Ordering::SeqCst);
+        self.world.wake();
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
+fn work(world: &World, config: &Config, stop: &AtomicBool) {
+    let stopped = || stop.load(Ordering::SeqCst);
+    loop {
+        let due = world.wait_for_rebuild(
+            config.debounce_quiet,
+            config.debounce_max,
+            Duration::from_secs(1),
+            &stopped,
+        );
+        if stopped() {
+            return;
+        }
+        match due {
+            Ok(true) => {}
+            Ok(false) => continue,
+            Err(e) => {
+                tracing::error!(error = %e, "the rebuild worker cannot wait for changes");
+                std::thread::sleep(Duration::from_secs(1));
+                continue;
+            }
+        }
+        let started = Instant::now();
+        match world.rebuild_aggregates(config.aggregates, &|_| {}) {
+            Ok(report) => {
+                let seconds = started.elapsed().as_secs_f64();
+                metrics::histogram!("horizon_rebuild_seconds").record(seconds);
+                metrics::counter!("horizon_aggregates_built_total")
+                    .increment(report.build.built as u64);
+                metrics::gauge!("horizon_published_generation").set(report.generation as f64);
+                tracing::info!(
+                    generation = report.generation,
+                    built = report.build.built,
+                    reused = report.build.reused,
+                    failed = report.build.failed.len(),
+                    seconds,
+                    "published"
+                );
+            }
+            Err(e) => {
+                tracing::error!(error = %e, "rebuild failed; the dirty set waits for the next");
+                std::thread::sleep(Duration::from_secs(1));
+            }
+        }
+    }
+}
