@@ -125,7 +125,21 @@ pub fn build_aggregates(
     options: &BuildOptions,
     progress: &(dyn Fn(Progress) + Sync),
 ) -> Result<BuildOutcome, AggregateError> {
-    build(bvh, models, store, options, None, progress)
+    build(bvh, models, store, options, None, progress, &|| false)
+}
+
+/// [`build_aggregates`], stopping with [`AggregateError::Stopped`] before any tree level
+/// once `stop` says so. Every level finished before is committed, so the next build reuses
+/// it; the manifest is not written.
+pub fn build_aggregates_until(
+    bvh: &Bvh,
+    models: &dyn ModelSource,
+    store: &dyn AggregateStore,
+    options: &BuildOptions,
+    progress: &(dyn Fn(Progress) + Sync),
+    stop: &(dyn Fn() -> bool + Sync),
+) -> Result<BuildOutcome, AggregateError> {
+    build(bvh, models, store, options, None, progress, stop)
 }
 
 /// Builds only `roots` and every node below them (which their handoffs need), and writes a
@@ -141,7 +155,9 @@ pub fn build_subtrees(
     roots: &BTreeSet<u32>,
     progress: &(dyn Fn(Progress) + Sync),
 ) -> Result<BuildOutcome, AggregateError> {
-    build(bvh, models, store, options, Some(roots), progress)
+    build(bvh, models, store, options, Some(roots), progress, &|| {
+        false
+    })
 }
 
 /// The rebuild of every node, or of the subtrees under `only`.
@@ -152,6 +168,7 @@ fn build(
     options: &BuildOptions,
     only: Option<&BTreeSet<u32>>,
     progress: &(dyn Fn(Progress) + Sync),
+    stop: &(dyn Fn() -> bool + Sync),
 ) -> Result<BuildOutcome, AggregateError> {
     let start = Instant::now();
     options
@@ -222,6 +239,9 @@ fn build(
     let mut below: HashMap<NodeId, Arc<Handoff>> = HashMap::new();
     let mut below_entries: HashMap<NodeId, AggregateEntry> = HashMap::new();
     for (depth, level) in levels.iter().enumerate().rev() {
+        if stop() {
+            return Err(AggregateError::Stopped);
+        }
         let level_start = Instant::now();
         let results: Result<Vec<LevelResult>, AggregateError> = level
             .par_iter()

@@ -56,6 +56,9 @@ pub enum AggregateError {
         /// What is wrong with it.
         reason: String,
     },
+    /// The build was asked to stop; the levels it finished are in the store.
+    #[error("the build was stopped")]
+    Stopped,
 }
 
 impl AggregateError {

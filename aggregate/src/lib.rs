@@ -43,8 +43,8 @@ pub mod store;
 #[cfg(feature = "baseline")]
 pub use build::build_subtrees;
 pub use build::{
-    build_aggregates, levels, resolve_atlas, BuildOptions, BuildOutcome, BuildReport, LevelTime,
-    Progress, AUTO_ATLAS_BYTES, AUTO_ATLAS_TEXTURES,
+    build_aggregates, build_aggregates_until, levels, resolve_atlas, BuildOptions, BuildOutcome,
+    BuildReport, LevelTime, Progress, AUTO_ATLAS_BYTES, AUTO_ATLAS_TEXTURES,
 };
 pub use error::AggregateError;
 pub use generate::{

@@ -24,7 +24,8 @@ use std::time::{Duration, Instant};
 
 use glam::Affine3A;
 use horizon_aggregate::{
-    build_aggregates, AggregateManifest, AggregateOptions, BuildOptions, BuildReport, Progress,
+    build_aggregates_until, AggregateManifest, AggregateOptions, BuildOptions, BuildReport,
+    Progress,
 };
 use horizon_bvh::{Aabb, BvhOptions, Cut, CutQuery, NodeId};
 use horizon_descriptors::{csd_distance, zernike_distance};
@@ -720,6 +721,18 @@ impl World {
         options: AggregateOptions,
         progress: &(dyn Fn(Progress) + Sync),
     ) -> Result<RebuildReport, WorldError> {
+        self.rebuild_aggregates_until(options, progress, &|| false)
+    }
+
+    /// [`World::rebuild_aggregates`], stopping before the next tree level once `stop` says so
+    /// (with [`horizon_aggregate::AggregateError::Stopped`]): what was built is kept for the
+    /// next rebuild, nothing is published.
+    pub fn rebuild_aggregates_until(
+        &self,
+        options: AggregateOptions,
+        progress: &(dyn Fn(Progress) + Sync),
+        stop: &(dyn Fn() -> bool + Sync),
+    ) -> Result<RebuildReport, WorldError> {
         self.ensure_tree()?;
         let started = Instant::now();
         let tree = self
@@ -737,7 +750,8 @@ impl World {
             aggregate: options,
             world_textures: self.models.texture_totals()?,
         };
-        let outcome = build_aggregates(&tree.bvh, &self.models, &sink, &build, progress)?;
+        let outcome =
+            build_aggregates_until(&tree.bvh, &self.models, &sink, &build, progress, stop)?;
         let manifest_bytes = serde_json::to_vec(&outcome.manifest)
             .map_err(|e| WorldError::Inconsistent(e.to_string()))?;
         let manifest = self.blobs.put(&manifest_bytes)?;

@@ -2,9 +2,9 @@
 //! changes, debounces them (the quiet time after the last change, at most the longest wait
 //! after the first), then rebuilds the aggregates of what changed and publishes the
 //! generation it built (`World::rebuild_aggregates`, which uses every core). Changes made
-//! during a build stay dirty and start the next one. A failed build is logged and retried at
-//! the next change; a stop takes effect between builds, and whatever a build had committed
-//! before the process ended is reused by the next.
+//! during a build stay dirty and start the next one. A failed build is logged and retried. A
+//! stop takes effect before the next tree level of a build under way (or between builds);
+//! what the build had committed is reused by the next start's build.
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
@@ -44,7 +44,7 @@ impl Rebuilder {
         }
     }
 
-    /// Stops the worker after the build under way, if any, and waits for it.
+    /// Stops the worker at its next safe point (between tree levels of a build) and waits.
     pub fn stop(mut self) {
         self.stop.store(true, Ordering::SeqCst);
         self.world.wake();
@@ -76,7 +76,7 @@ fn work(world: &World, config: &Config, stop: &AtomicBool) {
             }
         }
         let started = Instant::now();
-        match world.rebuild_aggregates(config.aggregates, &|_| {}) {
+        match world.rebuild_aggregates_until(config.aggregates, &|_| {}, &stopped) {
             Ok(report) => {
                 let seconds = started.elapsed().as_secs_f64();
                 metrics::histogram!("horizon_rebuild_seconds").record(seconds);
@@ -91,6 +91,10 @@ fn work(world: &World, config: &Config, stop: &AtomicBool) {
                     seconds,
                     "published"
                 );
+            }
+            Err(_) if stopped() => {
+                tracing::info!("rebuild stopped between levels; the next start resumes it");
+                return;
             }
             Err(e) => {
                 tracing::error!(error = %e, "rebuild failed; the dirty set waits for the next");
