@@ -11,6 +11,8 @@ import statistics
 import subprocess
 import sys
 
+import world_files
+
 ROOT = pathlib.Path(__file__).resolve().parents[2]  # lab/bench/budget_sweep.py -> the repository
 
 
@@ -24,12 +26,12 @@ def run(cmd):
 def main(horizon, d, ps, out_dir):
     lab = str(pathlib.Path(horizon).with_name("horizon-lab"))
     world = pathlib.Path(d)
-    name = json.loads((world / "world.json").read_text())["name"]
+    name = world_files.name(world)
     rows = []
     for p in ps:
         build = json.loads(run([horizon, "build", d, "--pixels-per-triangle", str(p), "--json"]))
         report = json.loads(run([lab, "report", d, "--views", "10", "--seed", "1", "--json"]))
-        nodes = json.loads((world / "aggregates" / "manifest.json").read_text())["nodes"].values()
+        nodes = world_files.published_manifest(world)["nodes"].values()
         errors = sorted(e["stats"]["error_pixels"] for e in nodes if e["stats"]["error"] > 0)
         p95 = errors[int(0.95 * (len(errors) - 1))] if errors else 0.0
         rows.append(

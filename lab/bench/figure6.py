@@ -16,6 +16,8 @@ import subprocess
 import sys
 import time
 
+import world_files
+
 ROOT = pathlib.Path(__file__).resolve().parents[2]  # lab/bench/figure6.py -> the repository
 RESULTS = ROOT / "lab" / "results"
 
@@ -54,7 +56,7 @@ def main(argv):
             k += 1
     rows = json.loads(pathlib.Path(rows_from).read_text()) if rows_from else []
     for d in dirs:
-        name = json.loads((pathlib.Path(d) / "world.json").read_text())["name"]
+        name = world_files.name(d)
         for mu in mus:
             for w in ws:
                 t = time.time()

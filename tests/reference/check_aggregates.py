@@ -4,7 +4,11 @@
   2. trimesh loads every aggregate, with at least one triangle;
   3. every aggregate has exactly one material and one texture, read from the GLB's own JSON
      chunk here (not by Horizon's code), and that texture is at most 128 KiB;
-  4. the manifest names an aggregate for every node of the tree, and every file it names exists.
+  4. the published manifest names an aggregate for every node of the tree (as many as the build
+     reported), and every blob it names exists.
+
+The world's published record is read from its SQLite database with Python's own sqlite3 module,
+and the manifest and aggregates from its blob folder (blobs/ab/<hash>), not through Horizon.
 
 Usage: check_aggregates.py HORIZON_BINARY VALIDATE_MJS [--dir BUILT_WORLD]
 Without --dir, generates the village world in a temporary folder with `horizon-lab gen world`
@@ -13,6 +17,8 @@ first.
 Prints one line per failed check and a closing 'N passed, M failed' line; exits 1 on failure."""
 import json
 import pathlib
+import shutil
+import sqlite3
 import struct
 import subprocess
 import sys
@@ -45,7 +51,21 @@ def image_bytes(doc, data):
     return sizes
 
 
-def main(horizon, validate_mjs, world):
+def published_manifest(world):
+    """The manifest the world publishes, read from world.db and the blob folder."""
+    db = sqlite3.connect(f"file:{world / 'world.db'}?mode=ro", uri=True)
+    try:
+        (value,) = db.execute("SELECT value FROM world WHERE key = 'published'").fetchone()
+    finally:
+        db.close()
+    return json.loads(blob(world, json.loads(value)["manifest"]).read_bytes())
+
+
+def blob(world, hash_):
+    return world / "blobs" / hash_[:2] / hash_
+
+
+def main(horizon, validate_mjs, world, nodes=None):
     passed, failed = 0, 0
 
     def check(name, ok, detail=""):
@@ -56,12 +76,20 @@ def main(horizon, validate_mjs, world):
             failed += 1
             print(f"FAIL {name} {detail}")
 
-    manifest = json.loads((world / "aggregates" / "manifest.json").read_text())
-    bvh = json.loads((world / "bvh.json").read_text())
-    files = sorted({world / "aggregates" / f"{e['glb']}.glb" for e in manifest["nodes"].values()})
-    check("manifest covers the tree", len(manifest["nodes"]) > 0, f"{len(manifest['nodes'])} nodes")
-    for f in files:
-        check(f"exists {f.name}", f.exists())
+    manifest = published_manifest(world)
+    check("manifest covers the tree", len(manifest["nodes"]) > 0 and nodes in (None, len(manifest["nodes"])),
+          f"{len(manifest['nodes'])} nodes in the manifest, {nodes} in the build")
+    hashes = sorted({e["glb"] for e in manifest["nodes"].values()})
+    for h in hashes:
+        check(f"exists {h}", blob(world, h).exists())
+    # The tools below read a file's type from its name: copies named <hash>.glb.
+    copies = tempfile.TemporaryDirectory()
+    files = []
+    for h in hashes:
+        if blob(world, h).exists():
+            f = pathlib.Path(copies.name) / f"{h}.glb"
+            shutil.copyfile(blob(world, h), f)
+            files.append(f)
     # 1. Khronos glTF-Validator.
     errors = ref.check_valid(check, validate_mjs, files)
     # 2-3. trimesh, and one material and one texture of at most 128 KiB.
@@ -77,6 +105,7 @@ def main(horizon, validate_mjs, world):
             check(f"trimesh {f.name}", tris > 0, f"{tris} triangles")
         except Exception as e:  # noqa: BLE001 - any loader failure is a failed check
             check(f"trimesh {f.name}", False, repr(e))
+    copies.cleanup()
     print(f"{len(files)} aggregates checked, validator errors {errors}")
     print(f"{passed} passed, {failed} failed")
     return 1 if failed else 0
@@ -97,5 +126,7 @@ if __name__ == "__main__":
     with tempfile.TemporaryDirectory() as tmp:
         world = pathlib.Path(tmp) / "village"
         subprocess.run([str(lab), "gen", "world", "village", str(world)], check=True)
-        subprocess.run([horizon, "build", str(world)], check=True)
-        sys.exit(main(horizon, validate_mjs, world))
+        built = subprocess.run([horizon, "build", str(world), "--json"], check=True,
+                               capture_output=True, text=True)
+        nodes = json.loads(built.stdout.strip().splitlines()[-1])["nodes"]
+        sys.exit(main(horizon, validate_mjs, world, nodes))
