@@ -172,8 +172,9 @@ mod tests {
             serde_json::from_str(r#"{"model": "m", "translation": [0, 0, 0], "scale": [1, 2, 3]}"#)
                 .expect("parse");
         assert_eq!(o.scale.per_axis(), [1.0, 2.0, 3.0]);
-        assert!(serde_json::from_str::<NewObject>(r#"{"model": "m", "translation": [0, 0]}"#)
-            .is_err());
+        assert!(
+            serde_json::from_str::<NewObject>(r#"{"model": "m", "translation": [0, 0]}"#).is_err()
+        );
         assert!(serde_json::from_str::<NewObject>(
             r#"{"model": "m", "translation": [0, 0, 0], "colour": 1}"#
         )
