@@ -10,7 +10,8 @@
 //!   `measuring.rs`: the store the unoptimised baseline is built into.
 //! - `sweep.rs`: `sweep`, Figure 5.
 //! - `bench_bvh.rs`: `bench-bvh`; `bench_aggregates.rs`: `bench-aggregates`;
-//!   `bench_descriptors.rs`: `bench-descriptors`.
+//!   `bench_descriptors.rs`: `bench-descriptors`; `bench_service.rs`: `bench-service` (uploads,
+//!   freshness, asset load against `horizon serve`).
 //! - `calibrate.rs`: `calibrate`, Table 1.
 //! - `distance.rs`: `distance`, the Hausdorff yardstick.
 //! - `views.rs`: the seeded viewpoints they share; `input.rs`: a built world's BVH input.
@@ -18,6 +19,7 @@
 mod bench_aggregates;
 mod bench_bvh;
 mod bench_descriptors;
+mod bench_service;
 mod calibrate;
 mod distance;
 mod gen;
@@ -147,6 +149,40 @@ enum Command {
         #[arg(long, default_value = RESULTS)]
         out: PathBuf,
     },
+    /// The world service over HTTP against a `horizon serve` child: uploads with 1 and 8
+    /// clients against offline ingest, freshness of placements, sustained mutations, asset
+    /// load at a fixed rate. Writes lab/results/service_<world>.{md,json}.
+    BenchService {
+        /// A built world (`horizon build`): its models are uploaded, and a copy is served.
+        world: PathBuf,
+        /// The `horizon` binary (default: beside this one).
+        #[arg(long)]
+        horizon: Option<PathBuf>,
+        /// Most models uploaded per client count.
+        #[arg(long, default_value_t = 2000)]
+        models: usize,
+        /// Placements timed for freshness (one per second).
+        #[arg(long, default_value_t = 200)]
+        placements: usize,
+        /// Seconds of sustained mutations.
+        #[arg(long, default_value_t = 60)]
+        sustain_seconds: u64,
+        /// Mutations per second when sustained.
+        #[arg(long, default_value_t = 20)]
+        sustain_rate: u64,
+        /// Requests per second of the asset load.
+        #[arg(long, default_value_t = 1000)]
+        rate: u64,
+        /// Seconds of each asset load.
+        #[arg(long, default_value_t = 30)]
+        load_seconds: u64,
+        /// The report (default lab/results/service_<world>.md).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Seed of positions and choices.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+    },
     /// Derives Table 1's deduplication thresholds by the paper's procedure (renders from three
     /// directions, SSIM, every pair of models and perturbed variants) and writes table1.json
     /// and table1.md.
@@ -215,6 +251,20 @@ enum GenCommand {
     },
 }
 
+/// The `horizon` binary: as given, else the one beside this binary.
+fn horizon_binary(given: Option<PathBuf>) -> anyhow::Result<PathBuf> {
+    if let Some(path) = given {
+        return Ok(path);
+    }
+    let beside = std::env::current_exe()?.with_file_name("horizon");
+    anyhow::ensure!(
+        beside.is_file(),
+        "no horizon binary at {} (build horizon-server, or pass --horizon)",
+        beside.display()
+    );
+    Ok(beside)
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
@@ -272,6 +322,31 @@ fn main() -> ExitCode {
             out,
         } => bench_aggregates::run(&dir, insert, seed, out.as_deref()),
         Command::BenchDescriptors { assets, out } => bench_descriptors::run(&assets, &out),
+        Command::BenchService {
+            world,
+            horizon,
+            models,
+            placements,
+            sustain_seconds,
+            sustain_rate,
+            rate,
+            load_seconds,
+            out,
+            seed,
+        } => horizon_binary(horizon).and_then(|horizon| {
+            bench_service::run(&bench_service::Args {
+                world,
+                horizon,
+                models,
+                placements,
+                sustain_seconds,
+                sustain_rate,
+                rate,
+                load_seconds,
+                out,
+                seed,
+            })
+        }),
         Command::Calibrate {
             out,
             assets,
