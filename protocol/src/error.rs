@@ -53,6 +53,8 @@ pub enum ErrorCode {
     QuotaExceeded,
     /// 404: no such model, object, asset or route.
     NotFound,
+    /// 405: the route exists, but not with this method.
+    MethodNotAllowed,
     /// 409: the request conflicts with the world's state.
     Conflict,
     /// 413: the body is over the limit.
@@ -85,6 +87,7 @@ impl ErrorCode {
             Self::Unauthorized => 401,
             Self::Forbidden | Self::QuotaExceeded => 403,
             Self::NotFound => 404,
+            Self::MethodNotAllowed => 405,
             Self::Conflict => 409,
             Self::TooLarge
             | Self::TooManyTriangles

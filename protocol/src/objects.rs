@@ -128,17 +128,23 @@ pub struct BatchRequest {
 /// One operation of a batch.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
-#[serde(tag = "op", rename_all = "snake_case")]
+#[serde(tag = "op", rename_all = "snake_case", deny_unknown_fields)]
 pub enum BatchOp {
     /// Place a new object.
     Create(NewObject),
-    /// Move one of the caller's objects.
+    /// Move one of the caller's objects: the parts of its placement named change.
     Move {
         /// The object.
         id: u64,
-        /// What changes.
-        #[serde(flatten)]
-        patch: ObjectPatch,
+        /// The new translation.
+        #[serde(default)]
+        translation: Option<[f32; 3]>,
+        /// The new rotation, a unit quaternion `[x, y, z, w]`.
+        #[serde(default)]
+        rotation: Option<[f32; 4]>,
+        /// The new scale.
+        #[serde(default)]
+        scale: Option<Scale>,
     },
     /// Delete one of the caller's objects.
     Delete {
@@ -194,5 +200,15 @@ mod tests {
         assert_eq!(b.ops.len(), 3);
         assert!(matches!(b.ops[1], BatchOp::Move { id: 4, .. }));
         assert_eq!(b.ops[2], BatchOp::Delete { id: 5 });
+        for typo in [
+            r#"{"ops": [{"op": "move", "id": 1, "translate": [5, 5, 5]}]}"#,
+            r#"{"ops": [{"op": "delete", "id": 1, "colour": 1}]}"#,
+            r#"{"ops": [{"op": "create", "model": "m", "translation": [0, 0, 0], "x": 1}]}"#,
+        ] {
+            assert!(
+                serde_json::from_str::<BatchRequest>(typo).is_err(),
+                "{typo}"
+            );
+        }
     }
 }

@@ -68,6 +68,11 @@ impl Models {
         self.len() == 0
     }
 
+    /// The number of a model storing the GLB with this content hash, if any.
+    pub fn by_asset(&self, asset: &str) -> Option<u64> {
+        self.state.read().ok()?.by_asset.get(asset).copied()
+    }
+
     /// The row of the model numbered `number`.
     pub fn row(&self, number: u64) -> Result<ModelRow, WorldError> {
         self.read()?

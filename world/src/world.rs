@@ -336,14 +336,24 @@ impl World {
     ) -> Result<(ModelRow, bool), WorldError> {
         let asset = self.blobs.put(glb)?;
         let id = content_hash(source);
-        let (row, created) = self.meta.add_model(NewModel {
+        let added = self.meta.add_model(NewModel {
             id: &id,
             asset: &asset,
             name,
             owner,
             bytes: glb.len() as u64,
             stats,
-        })?;
+        });
+        let (row, created) = match added {
+            Ok(added) => added,
+            Err(e) => {
+                // A refused model leaves no blob behind, unless another model stores it.
+                if self.models.by_asset(&asset).is_none() {
+                    let _ = self.blobs.delete(&asset);
+                }
+                return Err(e);
+            }
+        };
         if created {
             self.models.add(row.clone())?;
         }
@@ -365,6 +375,7 @@ impl World {
         }
         let ingested = import_upload(bytes, &self.limits)?;
         let glb = normalise(name, &ingested.mesh)?;
+        self.meta.check_model_quota(owner, glb.len() as u64)?;
         let asset = content_hash(&glb);
         if self.meta.descriptors(&asset)?.is_none() {
             let d = describe_stored(name, &glb)?;

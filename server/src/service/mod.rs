@@ -4,7 +4,7 @@
 //!
 //! # Layout
 //! - `mod.rs`: [`Config`], [`AppState`], [`app`], [`run`], the middleware stack (request ids,
-//!   tracing, compression, timeouts, metrics).
+//!   tracing, compression, timeouts and panics as the contract's errors, metrics).
 //! - `error.rs`: [`AppError`], every failure as the contract's JSON error.
 //! - `auth.rs`: bearer tokens.
 //! - `routes/`: one file per resource: `world.rs`, `models.rs`, `objects.rs`, `assets.rs`,
@@ -24,18 +24,18 @@ use std::time::{Duration, Instant};
 use axum::extract::{MatchedPath, Request, State};
 use axum::http::{HeaderName, HeaderValue};
 use axum::middleware::{self, Next};
-use axum::response::Response;
+use axum::response::{IntoResponse, Response};
 use axum::Router;
 use horizon_aggregate::AggregateOptions;
 use horizon_world::World;
 use metrics_exporter_prometheus::{PrometheusBuilder, PrometheusHandle};
 use tokio::net::TcpListener;
+use tower_http::catch_panic::CatchPanicLayer;
 use tower_http::compression::predicate::{DefaultPredicate, Predicate};
 use tower_http::compression::CompressionLayer;
 use tower_http::request_id::{
     MakeRequestId, PropagateRequestIdLayer, RequestId, SetRequestIdLayer,
 };
-use tower_http::timeout::TimeoutLayer;
 use tower_http::trace::TraceLayer;
 use utoipa::OpenApi;
 
@@ -148,6 +148,7 @@ pub fn app(state: AppState) -> Router {
     let timeout = state.config().request_timeout;
     router
         .fallback(routes::meta::not_found)
+        .method_not_allowed_fallback(routes::meta::method_not_allowed)
         .with_state(state.clone())
         .layer(middleware::from_fn_with_state(state, record_metrics))
         .layer(
@@ -156,9 +157,18 @@ pub fn app(state: AppState) -> Router {
                 .gzip(true)
                 .compress_when(DefaultPredicate::new().and(NotPartial)),
         )
-        .layer(TimeoutLayer::with_status_code(
-            axum::http::StatusCode::SERVICE_UNAVAILABLE,
-            timeout,
+        .layer(middleware::from_fn(move |request: Request, next: Next| {
+            time_limited(timeout, request, next)
+        }))
+        .layer(CatchPanicLayer::custom(
+            |panic: Box<dyn std::any::Any + Send>| {
+                let detail = panic
+                    .downcast_ref::<&str>()
+                    .map(|s| (*s).to_owned())
+                    .or_else(|| panic.downcast_ref::<String>().cloned())
+                    .unwrap_or_default();
+                AppError::internal(format!("a handler panicked: {detail}")).into_response()
+            },
         ))
         .layer(PropagateRequestIdLayer::new(REQUEST_ID.clone()))
         .layer(
@@ -203,6 +213,18 @@ impl Predicate for NotPartial {
         B: axum::body::HttpBody,
     {
         response.status() != axum::http::StatusCode::PARTIAL_CONTENT
+    }
+}
+
+/// Answers a request that outlasts `limit` with the contract's 503 `overloaded`.
+async fn time_limited(limit: Duration, request: Request, next: Next) -> Response {
+    match tokio::time::timeout(limit, next.run(request)).await {
+        Ok(response) => response,
+        Err(_) => AppError::new(
+            horizon_protocol::ErrorCode::Overloaded,
+            format!("the request took longer than {} s", limit.as_secs_f64()),
+        )
+        .into_response(),
     }
 }
 

@@ -169,6 +169,9 @@ pub trait MetaStore: Send + Sync + std::fmt::Debug {
     /// Adds a model, or finds the one with the same id: `(row, true)` if it was added. A
     /// user's `max_bytes` is checked in the same transaction.
     fn add_model(&self, model: NewModel<'_>) -> Result<(ModelRow, bool), WorldError>;
+    /// Refuses, as [`MetaStore::add_model`] would, a model of `bytes` for `owner` past their
+    /// `max_bytes` (a cheap check before the work of ingest; `add_model` checks again).
+    fn check_model_quota(&self, owner: &str, bytes: u64) -> Result<(), WorldError>;
     /// The model with this id.
     fn model(&self, id: &str) -> Result<Option<ModelRow>, WorldError>;
     /// Every model, by number.

@@ -1,6 +1,7 @@
 //! [`SqliteMeta`]: the embedded [`MetaStore`], one SQLite database (`world.db`) in WAL mode
 //! with full synchronisation, so a committed transaction survives a killed process and a
 //! lost machine alike. One connection, behind a mutex: every call is one short transaction.
+//! Object ids are never reused (`AUTOINCREMENT`): an id names one object for the world's life.
 
 use std::path::Path;
 use std::sync::{Mutex, MutexGuard};
@@ -37,7 +38,7 @@ CREATE TABLE IF NOT EXISTS descriptors (
     radius REAL NOT NULL
 );
 CREATE TABLE IF NOT EXISTS objects (
-    id INTEGER PRIMARY KEY,
+    id INTEGER PRIMARY KEY AUTOINCREMENT,
     model INTEGER NOT NULL REFERENCES models(number),
     transform BLOB NOT NULL,
     owner TEXT,
@@ -135,29 +136,7 @@ impl MetaStore for SqliteMeta {
             return Ok((row, false));
         }
         if let Some(owner) = m.owner {
-            let limit: Option<Option<i64>> = tx
-                .query_row(
-                    "SELECT max_bytes FROM users WHERE name = ?1",
-                    [owner],
-                    |r| r.get(0),
-                )
-                .optional()
-                .map_err(sql)?;
-            if let Some(Some(max)) = limit {
-                let used: i64 = tx
-                    .query_row(
-                        "SELECT COALESCE(SUM(bytes), 0) FROM models WHERE owner = ?1",
-                        [owner],
-                        |r| r.get(0),
-                    )
-                    .map_err(sql)?;
-                if used.saturating_add(m.bytes as i64) > max {
-                    return Err(WorldError::QuotaExceeded(format!(
-                        "{owner} has stored {used} of {max} bytes of models; this one is {}",
-                        m.bytes
-                    )));
-                }
-            }
+            check_bytes_quota(&tx, owner, m.bytes)?;
         }
         let number: i64 = tx
             .query_row("SELECT COUNT(*) FROM models", [], |r| r.get(0))
@@ -180,6 +159,11 @@ impl MetaStore for SqliteMeta {
             .ok_or_else(|| WorldError::Inconsistent("a model vanished on insert".into()))?;
         tx.commit().map_err(sql)?;
         Ok((row, true))
+    }
+
+    fn check_model_quota(&self, owner: &str, bytes: u64) -> Result<(), WorldError> {
+        let db = self.lock()?;
+        check_bytes_quota(&db, owner, bytes)
     }
 
     fn model(&self, id: &str) -> Result<Option<ModelRow>, WorldError> {
@@ -650,6 +634,33 @@ fn owned_object(
         }
     }
     Ok(row)
+}
+
+/// Refuses a model of `bytes` for `owner` past their `max_bytes`.
+fn check_bytes_quota(db: &Connection, owner: &str, bytes: u64) -> Result<(), WorldError> {
+    let limit: Option<Option<i64>> = db
+        .query_row(
+            "SELECT max_bytes FROM users WHERE name = ?1",
+            [owner],
+            |r| r.get(0),
+        )
+        .optional()
+        .map_err(sql)?;
+    if let Some(Some(max)) = limit {
+        let used: i64 = db
+            .query_row(
+                "SELECT COALESCE(SUM(bytes), 0) FROM models WHERE owner = ?1",
+                [owner],
+                |r| r.get(0),
+            )
+            .map_err(sql)?;
+        if used.saturating_add(bytes as i64) > max {
+            return Err(WorldError::QuotaExceeded(format!(
+                "{owner} has stored {used} of {max} bytes of models; this one is {bytes}"
+            )));
+        }
+    }
+    Ok(())
 }
 
 /// Refuses one more object for `user` past their `max_objects`.

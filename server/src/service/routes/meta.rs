@@ -81,3 +81,11 @@ and fetch immutable, content-addressed assets.</p>
 pub async fn not_found() -> AppError {
     AppError::new(ErrorCode::NotFound, "no such route")
 }
+
+/// A route asked with a method it does not take.
+pub async fn method_not_allowed() -> AppError {
+    AppError::new(
+        ErrorCode::MethodNotAllowed,
+        "this route does not take that method",
+    )
+}

@@ -56,8 +56,15 @@ impl<T: DeserializeOwned> FromRequest<AppState> for JsonBody<T> {
         }
         let bytes = body_bytes(request, state.config().body_limit).await?;
         serde_json::from_slice(&bytes).map(JsonBody).map_err(|e| {
+            // The only numbers these bodies carry besides ids are placements; a number past
+            // f64's range is an infinite coordinate.
+            let code = if e.to_string().starts_with("number out of range") {
+                ErrorCode::InvalidTransform
+            } else {
+                ErrorCode::MalformedJson
+            };
             AppError::new(
-                ErrorCode::MalformedJson,
+                code,
                 format!("the body is not the JSON this route takes: {e}"),
             )
         })

@@ -241,7 +241,17 @@ pub async fn batch(
                         transform: placement(o.translation, o.rotation, o.scale)
                             .map_err(|e| WorldError::InvalidTransform(e.message))?,
                     },
-                    BatchOp::Move { id, patch } => {
+                    BatchOp::Move {
+                        id,
+                        translation,
+                        rotation,
+                        scale,
+                    } => {
+                        let patch = ObjectPatch {
+                            translation,
+                            rotation,
+                            scale,
+                        };
                         let row = match placed.get(&id) {
                             Some(r) => r.clone(),
                             None => world
