@@ -135,7 +135,7 @@ fn add_model_adds_once_and_numbers_densely_from_zero() {
     assert_eq!(m.model(&content_hash(b"nothing")).expect("model"), None);
 
     // Pages are in id order, after the given id.
-    let mut ids = vec![a.id.clone(), b.id.clone(), c.id.clone()];
+    let mut ids = [a.id.clone(), b.id.clone(), c.id.clone()];
     ids.sort();
     let page: Vec<String> = m
         .models_page(None, 2)
@@ -198,6 +198,24 @@ fn max_bytes_is_checked_when_a_user_adds_a_model() {
         .map(|r| r.number)
         .collect();
     assert_eq!(numbers, [0, 1, 2, 3]);
+}
+
+#[test]
+fn check_model_quota_refuses_what_add_model_would() {
+    let dir = TempDir::new("check-quota");
+    let m = meta(&dir);
+    m.add_token(&user("ann", None, Some(100)), &content_hash(b"t1"))
+        .expect("token");
+    m.check_model_quota("ann", 100).expect("100 of 100");
+    add(&m, "a", Some("ann"), 70).expect("70 of 100");
+    m.check_model_quota("ann", 30).expect("exactly 100");
+    assert!(matches!(
+        m.check_model_quota("ann", 31),
+        Err(WorldError::QuotaExceeded(_))
+    ));
+    assert!(add(&m, "b", Some("ann"), 31).is_err(), "add_model agrees");
+    m.check_model_quota("bob", u64::MAX / 2)
+        .expect("an unknown user has no quota");
 }
 
 #[test]
@@ -664,7 +682,7 @@ fn staged_blobs_appear_only_when_committed() {
         assert_eq!(blobs.get(h).expect("get"), None, "staged, not committed");
         assert_eq!(blobs.size(h).expect("size"), None);
     }
-    assert_eq!(blobs.list().expect("list"), [kept.clone()]);
+    assert_eq!(blobs.list().expect("list"), std::slice::from_ref(&kept));
     blobs.commit_staged().expect("commit");
     assert_eq!(blobs.get(&a).expect("get"), Some(b"staged a".to_vec()));
     assert_eq!(blobs.size(&b).expect("size"), Some(8));
@@ -743,7 +761,7 @@ fn sweep_removes_temporary_files_and_nothing_else() {
     std::fs::write(&tmp2, b"").expect("tmp2");
     assert_eq!(
         blobs.list().expect("list"),
-        [a.clone()],
+        std::slice::from_ref(&a),
         "temporaries are not blobs"
     );
     assert_eq!(blobs.sweep().expect("sweep"), 2);

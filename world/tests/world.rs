@@ -550,6 +550,44 @@ fn a_change_during_a_build_stays_dirty_for_the_next() {
         .expect("wait"));
 }
 
+#[test]
+fn a_change_the_tree_cannot_take_is_not_committed() {
+    // A world created with models but no objects (never described): its tree is empty, and
+    // placing a model that has no descriptors cannot go into it. The change must then fail
+    // whole, as World::apply promises, not commit in the database behind the tree's back
+    // (the client would be told it failed, and the log would hold a change that no replay
+    // can apply).
+    let dir = TempDir::new("undescribed");
+    let world = World::create(dir.path(), "test", 1, &models(), &[]).expect("create");
+    let model = world.models_page(None, 10).expect("models")[0].id.clone();
+    let result = world.apply(
+        None,
+        &[Change::Create {
+            model,
+            transform: Affine3A::IDENTITY,
+        }],
+    );
+    let s = world.status().expect("status");
+    let in_tree = world.with_tree(|t| t.bvh.len()).expect("tree");
+    let stored = world.meta().object_count().expect("count");
+    match result {
+        Ok(_) => assert_eq!((stored, in_tree, s.objects), (1, 1, 1)),
+        Err(e) => assert_eq!(
+            (
+                stored,
+                s.generation,
+                world.meta().generation().expect("generation")
+            ),
+            (0, 0, 0),
+            "apply failed ({e}) but committed the change"
+        ),
+    }
+    drop(world);
+    // Whatever happened, the world opens and loads its tree.
+    let world = World::open(dir.path()).expect("reopen");
+    world.ensure_tree().expect("the tree loads");
+}
+
 // -------------------------------------------------------------------------------------------
 // Garbage collection
 // -------------------------------------------------------------------------------------------
@@ -912,7 +950,10 @@ fn the_same_upload_from_8_threads_is_one_model_stored_once() {
     assert_eq!(first.owner.as_deref(), Some("ann"));
     assert_eq!(world.status().expect("status").models, 1);
     assert_eq!(world.models().len(), 1);
-    assert_eq!(world.blobs().list().expect("list"), [first.asset.clone()]);
+    assert_eq!(
+        world.blobs().list().expect("list"),
+        std::slice::from_ref(&first.asset)
+    );
     assert!(world
         .meta()
         .descriptors(&first.asset)
