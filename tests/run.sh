@@ -3,7 +3,8 @@
 # reference checks need, then runs, in order:
 #   1. cargo fmt --check and cargo clippy -D warnings over the workspace;
 #   2. the layout invariant: the product (horizon-server) links no lab code and no baseline;
-#   3. cargo test over the workspace (unit, integration and property tests);
+#   3. cargo test over the workspace (unit, integration and property tests), then the kill test
+#      (horizon serve SIGKILLed at random under mutations; every acknowledged one survives);
 #   4. the reference checks in tests/reference against third-party tools: the Khronos
 #      glTF-Validator (npm gltf-validator), trimesh, and an independent glTF reading in numpy.
 # The Python venv (trimesh, fast-simplification, pymeshlab, point-cloud-utils) and the npm
@@ -44,6 +45,9 @@ fi
 
 step "cargo test"
 cargo test --workspace --quiet
+
+step "horizon serve killed with SIGKILL under mutations, 20 times (ignored by cargo test)"
+cargo test --quiet -p horizon-server --test kill -- --ignored
 
 step "reference checks (Khronos glTF-Validator, trimesh)"
 # The product under test is the release horizon, built alone so that it is exactly what ships

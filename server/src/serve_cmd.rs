@@ -25,6 +25,11 @@ pub fn serve(dir: &Path, listen: SocketAddr) -> anyhow::Result<()> {
 
 /// Runs the service over an opened world.
 fn serve_world(world: World, listen: SocketAddr) -> anyhow::Result<()> {
+    anyhow::ensure!(
+        world.is_exclusive(),
+        "another process serves or builds {}",
+        world.root().display()
+    );
     let world = Arc::new(world);
     // Load (or replay) the tree before taking requests, so the first cut does not wait.
     world.ensure_tree()?;

@@ -41,6 +41,11 @@ pub fn build(
 ) -> anyhow::Result<()> {
     let t0 = Instant::now();
     let world = World::open(dir)?;
+    anyhow::ensure!(
+        world.is_exclusive(),
+        "another process serves or builds {} (stop it first)",
+        dir.display()
+    );
     let load_seconds = t0.elapsed().as_secs_f64();
 
     let t1 = Instant::now();

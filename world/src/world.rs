@@ -44,9 +44,7 @@ use crate::store::{
     Applied, BlobDir, BlobStore, MetaStore, ModelRow, Mutation, NewModel, ObjectRow, Published,
     Snapshot, SqliteMeta, User,
 };
-#[cfg(doc)]
-use crate::tree::Describe;
-use crate::tree::Tree;
+use crate::tree::{Describe, Tree};
 
 /// Distinct models up to which the BVH's descriptor scales come from every pair of them;
 /// above it, from [`SCALE_SAMPLE_PAIRS`] seeded pairs.
@@ -67,6 +65,12 @@ pub struct World {
     blobs: Arc<dyn BlobStore>,
     models: Models,
     limits: UploadLimits,
+    /// The exclusive lock on `DIR/world.lock`, if this process got it: only its holder
+    /// serves, builds, or clears what interrupted writes left.
+    lock: Option<std::fs::File>,
+    /// Held while a model's blob is stored and its row recorded, so that rows enter the
+    /// model list in number order and a refused model's blob is judged unused correctly.
+    storing: Mutex<()>,
     /// Held by a mutation from its commit until the tree has it.
     writer: Mutex<()>,
     tree: RwLock<Option<Tree>>,
@@ -204,9 +208,11 @@ impl World {
             return Err(WorldError::NotAWorld(root.to_path_buf()));
         }
         let world = Self::open_stores(root, "", 0)?;
-        world.blobs.sweep()?;
+        if world.is_exclusive() {
+            world.blobs.sweep()?;
+            world.remove_orphans()?;
+        }
         world.refresh_status()?;
-        world.remove_orphans()?;
         Ok(world)
     }
 
@@ -227,8 +233,21 @@ impl World {
         Self::create(root, &name, 0, &[], &[])
     }
 
-    /// The stores of `root`, created if missing.
+    /// Whether this process holds the world's lock: no other process serves or builds it.
+    pub fn is_exclusive(&self) -> bool {
+        self.lock.is_some()
+    }
+
+    /// The stores of `root`, created if missing, and the world's lock if free.
     fn open_stores(root: &Path, name: &str, seed: u64) -> Result<World, WorldError> {
+        let lock_path = root.join("world.lock");
+        let file = std::fs::OpenOptions::new()
+            .create(true)
+            .truncate(false)
+            .write(true)
+            .open(&lock_path)
+            .map_err(|e| WorldError::io(&lock_path, e))?;
+        let lock = file.try_lock().is_ok().then_some(file);
         let meta: Arc<dyn MetaStore> =
             Arc::new(SqliteMeta::open(&root.join("world.db"), name, seed)?);
         let blobs: Arc<dyn BlobStore> = Arc::new(BlobDir::new(&root.join("blobs")));
@@ -239,6 +258,8 @@ impl World {
             blobs,
             models,
             limits: UploadLimits::default(),
+            lock,
+            storing: Mutex::new(()),
             writer: Mutex::new(()),
             tree: RwLock::new(None),
             status: Mutex::new(Status::default()),
@@ -247,11 +268,13 @@ impl World {
     }
 
     /// Moves a format-1 world into the database: models re-addressed by BLAKE3, descriptors
-    /// carried over, objects placed in id order. The old files are left as they were.
+    /// carried over, objects placed in id order. Every model is read before anything is
+    /// written, and the database is built under another name and renamed into place when
+    /// whole, so an interrupted upgrade is started again by the next open. The old files are
+    /// left as they were.
     fn upgrade(root: &Path) -> Result<World, WorldError> {
         let legacy = LegacyWorld::read(root)?;
-        let world = Self::open_stores(root, &legacy.manifest.name, legacy.manifest.seed)?;
-        let mut numbers: HashMap<&str, u64> = HashMap::new();
+        let mut models = Vec::with_capacity(legacy.manifest.models.len());
         for m in &legacy.manifest.models {
             let glb = legacy.model_bytes(&m.hash)?;
             let mesh = horizon_mesh::import_bytes(
@@ -262,23 +285,46 @@ impl World {
             )
             .map_err(|e| WorldError::model(&m.name, e))?
             .mesh;
-            let (row, _) = world.store_model(&glb, &glb, &m.name, None, &stats(&mesh))?;
-            if let Some(d) = legacy.descriptors.get(&m.hash) {
-                world.meta.put_descriptors(&row.asset, d)?;
-            }
-            numbers.insert(m.hash.as_str(), row.number);
+            models.push((m, glb, stats(&mesh)));
         }
-        let mutations: Vec<Mutation> = legacy
-            .objects
-            .iter()
-            .map(|o| Mutation::Create {
-                model: numbers[o.model.as_str()],
-                transform: Affine3A::from_cols_array(&o.transform),
-            })
-            .collect();
-        world.meta.apply(None, &mutations)?;
-        world.refresh_status()?;
-        Ok(world)
+        let building = root.join("world.db.upgrading");
+        for suffix in ["", "-wal", "-shm"] {
+            let _ = std::fs::remove_file(format!("{}{suffix}", building.display()));
+        }
+        {
+            let meta = SqliteMeta::open(&building, &legacy.manifest.name, legacy.manifest.seed)?;
+            let blobs = BlobDir::new(&root.join("blobs"));
+            let mut numbers: HashMap<&str, u64> = HashMap::new();
+            for (m, glb, stats) in &models {
+                let asset = blobs.put(glb)?;
+                let (row, _) = meta.add_model(NewModel {
+                    id: &asset,
+                    asset: &asset,
+                    name: &m.name,
+                    owner: None,
+                    bytes: glb.len() as u64,
+                    stats,
+                })?;
+                if let Some(d) = legacy.descriptors.get(&m.hash) {
+                    meta.put_descriptors(&asset, d)?;
+                }
+                numbers.insert(m.hash.as_str(), row.number);
+            }
+            let mutations: Vec<Mutation> = legacy
+                .objects
+                .iter()
+                .map(|o| Mutation::Create {
+                    model: numbers[o.model.as_str()],
+                    transform: Affine3A::from_cols_array(&o.transform),
+                })
+                .collect();
+            meta.apply(None, &mutations)?;
+            meta.checkpoint()?;
+        }
+        let db = root.join("world.db");
+        std::fs::rename(&building, &db).map_err(|e| WorldError::io(&db, e))?;
+        crate::durable::sync_dir(root);
+        Self::open(root)
     }
 
     /// Reads the counters the status reports from the stores.
@@ -334,6 +380,10 @@ impl World {
         owner: Option<&str>,
         stats: &serde_json::Value,
     ) -> Result<(ModelRow, bool), WorldError> {
+        let _storing = self
+            .storing
+            .lock()
+            .map_err(|_| WorldError::Inconsistent("model store lock poisoned".into()))?;
         let asset = self.blobs.put(glb)?;
         let id = content_hash(source);
         let added = self.meta.add_model(NewModel {
@@ -456,15 +506,28 @@ impl World {
                 Change::Delete { id } => Ok(Mutation::Delete { id: *id }),
             })
             .collect::<Result<Vec<_>, WorldError>>()?;
+        // Every placed model must be one the tree can take, before anything commits.
+        for m in &mutations {
+            if let Mutation::Create { model, .. } = m {
+                self.models.descriptors_of(*model)?;
+            }
+        }
         let _writer = self.lock_writer()?;
-        self.ensure_tree()?;
+        self.load_tree()?;
         let applied = self.meta.apply(user, &mutations)?;
         let mut touched = Vec::new();
         {
-            let mut tree = self.write_tree()?;
-            if let Some(tree) = tree.as_mut() {
+            let mut slot = self.write_tree()?;
+            if let Some(tree) = slot.as_mut() {
                 for a in &applied {
-                    touched.extend(tree.apply(a, &self.models)?);
+                    match tree.apply(a, &self.models) {
+                        Ok(nodes) => touched.extend(nodes),
+                        Err(e) => {
+                            // Committed but not in the tree: the next load replays it.
+                            *slot = None;
+                            return Err(e);
+                        }
+                    }
                 }
             }
         }
@@ -624,6 +687,7 @@ impl World {
     /// world's scales, and snapshots it. Every model must be described. Returns its size.
     pub fn build_tree(&self, mu: f32, w: f32) -> Result<(usize, usize, u32), WorldError> {
         let _writer = self.lock_writer()?;
+        self.describe_models(&|_, _| {})?;
         let generation = self.meta.generation()?;
         let tree = Tree::bulk(
             self.bvh_options(mu, w)?,
@@ -638,11 +702,24 @@ impl World {
     }
 
     /// Loads the tree if it is not loaded: its snapshot with the log replayed, or, for a world
-    /// never built, a bulk build with the default weights.
+    /// never built, a bulk build with the default weights (its models described first), then
+    /// snapshotted if this process holds the world.
     pub fn ensure_tree(&self) -> Result<(), WorldError> {
         if self.read_tree()?.is_some() {
             return Ok(());
         }
+        let _writer = self.lock_writer()?;
+        self.load_tree()
+    }
+
+    /// [`World::ensure_tree`] with the writer lock held, so that the generation and the
+    /// objects it reads are one state.
+    fn load_tree(&self) -> Result<(), WorldError> {
+        if self.read_tree()?.is_some() {
+            return Ok(());
+        }
+        let published = self.lock_status()?.published.generation;
+        let mut touched = Vec::new();
         let tree = match self.meta.snapshot()? {
             Some(snapshot) => {
                 let bytes = self.blobs.get(&snapshot.blob)?.ok_or_else(|| {
@@ -653,23 +730,35 @@ impl World {
                 })?;
                 let mut tree = Tree::from_snapshot(&bytes)?;
                 for change in self.meta.log_after(tree.generation)? {
-                    tree.apply(&change, &self.models)?;
+                    let nodes = tree.apply(&change, &self.models)?;
+                    if change.generation > published {
+                        touched.extend(nodes.into_iter().map(|n| (n, change.generation)));
+                    }
                 }
                 tree
             }
-            None if self.meta.object_count()? == 0 => {
-                let mut tree = Tree::empty(
-                    self.bvh_options(horizon_bvh::DEFAULT_MU, horizon_bvh::DEFAULT_W)?,
-                )?;
-                tree.generation = self.meta.generation()?;
+            None => {
+                self.describe_models(&|_, _| {})?;
+                let generation = self.meta.generation()?;
+                let options = self.bvh_options(horizon_bvh::DEFAULT_MU, horizon_bvh::DEFAULT_W)?;
+                let objects = self.bulk_input()?;
+                let tree = if objects.is_empty() {
+                    let mut tree = Tree::empty(options)?;
+                    tree.generation = generation;
+                    tree
+                } else {
+                    Tree::bulk(options, &objects, &self.models, generation)?
+                };
+                // Only the world's holder writes; a reader beside it keeps its tree to itself.
+                if self.is_exclusive() {
+                    self.save_snapshot(&tree)?;
+                }
                 tree
             }
-            None => return Err(WorldError::NotBuilt(self.root.clone())),
         };
-        let mut slot = self.write_tree()?;
-        if slot.is_none() {
-            *slot = Some(tree);
-        }
+        // Nodes changed since the published generation are dirty again in this process.
+        self.lock_status()?.dirty.extend(touched);
+        *self.write_tree()? = Some(tree);
         Ok(())
     }
 

@@ -820,7 +820,8 @@ fn legacy_files(dir: &Path) -> BTreeMap<PathBuf, Vec<u8>> {
             let p = e.path();
             let rel = p.strip_prefix(root).expect("under root").to_path_buf();
             let name = rel.to_string_lossy();
-            if name.starts_with("world.db") || name.starts_with("blobs") {
+            // What the upgrade adds: the database, the blobs, the lock.
+            if name.starts_with("world.db") || name.starts_with("blobs") || name == "world.lock" {
                 continue;
             }
             if p.is_dir() {

@@ -107,6 +107,14 @@ impl SqliteMeta {
         Ok(meta)
     }
 
+    /// Moves everything from the write-ahead log into the database file, so that the file
+    /// alone holds the world (before it is renamed into place).
+    pub fn checkpoint(&self) -> Result<(), WorldError> {
+        let db = self.lock()?;
+        db.query_row("PRAGMA wal_checkpoint(TRUNCATE)", [], |_| Ok(()))
+            .map_err(sql)
+    }
+
     fn lock(&self) -> Result<MutexGuard<'_, Connection>, WorldError> {
         self.db
             .lock()
