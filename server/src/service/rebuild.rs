@@ -89,6 +89,8 @@ fn work(world: &World, config: &Config, stop: &AtomicBool) {
                     reused = report.build.reused,
                     failed = report.build.failed.len(),
                     seconds,
+                    build_seconds = report.build.seconds,
+                    stages = ?report.build.stages,
                     "published"
                 );
             }
