@@ -112,7 +112,7 @@ pub fn run(dir: &Path, insert: usize, seed: u64, out: Option<&Path>) -> anyhow::
         aggregate: options,
         world_textures: models.texture_totals()?,
     };
-    let sink = AggregateSink::new(world.meta(), world.blobs(), Some(full_manifest.clone()));
+    let sink = AggregateSink::new(world.meta(), world.blobs(), Some((*full_manifest).clone()));
     let outcome = build_aggregates(bvh, models, &sink, &build_options, &|p: Progress| {
         bar.show(p.done, p.total)
     })?;

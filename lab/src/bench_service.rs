@@ -117,13 +117,11 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         models.push((row.name.clone(), source.models().glb(row.number)?));
     }
     anyhow::ensure!(!models.is_empty(), "{} has no models", args.world.display());
-    let hashes: Vec<String> = source
-        .published_manifest()?
-        .with_context(|| format!("{} is not built (run horizon build)", args.world.display()))?
-        .nodes
-        .values()
-        .map(|e| e.glb.clone())
-        .collect();
+    anyhow::ensure!(
+        source.published_manifest()?.is_some(),
+        "{} is not built (run horizon build)",
+        args.world.display()
+    );
     drop(source);
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .enable_all()
@@ -187,8 +185,9 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         args.seed,
     ))?;
 
-    // 3. Asset load.
+    // 3. Asset load, on the aggregates published now (the mutations replaced some).
     let mut assets = Vec::new();
+    let hashes = runtime.block_on(published_aggregates(&served, &server.url))?;
     for target in ["assets", "world"] {
         eprintln!(
             "horizon-lab: bench-service: {} req/s on {target}",
@@ -504,6 +503,33 @@ async fn open_loop(
         errors.load(std::sync::atomic::Ordering::Relaxed),
         percentiles(&h),
     ))
+}
+
+/// The aggregate hashes of the manifest `dir` publishes, read over HTTP: the record from the
+/// world's database (read beside the server), the manifest from `/assets/{hash}`.
+async fn published_aggregates(dir: &Path, url: &str) -> anyhow::Result<Vec<String>> {
+    use horizon_world::MetaStore;
+    let meta = horizon_world::SqliteMeta::open(&dir.join("world.db"), "", 0)?;
+    let hash = meta
+        .published()?
+        .manifest
+        .context("the served world publishes no manifest")?;
+    let manifest: Value = reqwest::get(format!("{url}/assets/{hash}"))
+        .await?
+        .error_for_status()?
+        .json()
+        .await?;
+    let hashes: Vec<String> = manifest["nodes"]
+        .as_object()
+        .context("a manifest without nodes")?
+        .values()
+        .filter_map(|e| e["glb"].as_str().map(str::to_owned))
+        .collect();
+    anyhow::ensure!(
+        !hashes.is_empty(),
+        "the published manifest names no aggregate"
+    );
+    Ok(hashes)
 }
 
 /// The world's bounds from `/v1/world`.

@@ -21,8 +21,12 @@ pub struct AggregateSink<'a> {
     blobs: &'a dyn BlobStore,
     /// The published manifest the build started from.
     published: Option<AggregateManifest>,
-    /// Entries staged since the last commit, as (key, JSON).
-    staged: Mutex<Vec<(String, String)>>,
+    /// What the store can serve, by key, as the build starts; `None`: read from the stores.
+    known: Option<HashMap<String, AggregateEntry>>,
+    /// Entries committed by this build.
+    committed: Mutex<Vec<AggregateEntry>>,
+    /// Entries staged since the last commit.
+    staged: Mutex<Vec<AggregateEntry>>,
     /// The manifest the build wrote.
     written: Mutex<Option<AggregateManifest>>,
 }
@@ -38,15 +42,39 @@ impl<'a> AggregateSink<'a> {
             meta,
             blobs,
             published,
+            known: None,
+            committed: Mutex::new(Vec::new()),
             staged: Mutex::new(Vec::new()),
             written: Mutex::new(None),
         }
     }
 
-    /// The manifest the build wrote, if it finished.
-    pub fn into_manifest(self) -> Option<AggregateManifest> {
-        self.written.into_inner().ok().flatten()
+    /// A sink that starts from `known`, the entries the caller holds in memory (every blob
+    /// they name stored), instead of reading them back from the stores.
+    pub fn with_known(mut self, known: HashMap<String, AggregateEntry>) -> Self {
+        self.known = Some(known);
+        self
     }
+
+    /// The entries this build committed.
+    pub fn committed(&self) -> Vec<AggregateEntry> {
+        self.committed.lock().map(|c| c.clone()).unwrap_or_default()
+    }
+}
+
+/// Every recorded entry whose blobs are all stored, by key.
+pub fn stored_entries(
+    meta: &dyn MetaStore,
+    blobs: &dyn BlobStore,
+) -> Result<HashMap<String, AggregateEntry>, WorldError> {
+    let mut out = HashMap::new();
+    for e in recorded_entries(meta)? {
+        let held = |hash: &str| blobs.size(hash).ok().flatten().is_some();
+        if held(&e.glb) && e.parts.as_deref().is_none_or(held) {
+            out.insert(e.key.clone(), e);
+        }
+    }
+    Ok(out)
 }
 
 /// Every aggregate entry the metadata store records, parsed (unparsable lines are skipped:
@@ -70,14 +98,10 @@ pub fn named_blobs(manifest: &AggregateManifest) -> HashSet<String> {
 
 impl AggregateStore for AggregateSink<'_> {
     fn known(&self) -> Result<HashMap<String, AggregateEntry>, AggregateError> {
-        let mut out = HashMap::new();
-        for e in recorded_entries(self.meta).map_err(store_error)? {
-            let held = |hash: &str| self.blobs.size(hash).ok().flatten().is_some();
-            if held(&e.glb) && e.parts.as_deref().is_none_or(held) {
-                out.insert(e.key.clone(), e);
-            }
+        match &self.known {
+            Some(known) => Ok(known.clone()),
+            None => stored_entries(self.meta, self.blobs).map_err(store_error),
         }
-        Ok(out)
     }
 
     fn manifest(&self) -> Result<Option<AggregateManifest>, AggregateError> {
@@ -103,14 +127,10 @@ impl AggregateStore for AggregateSink<'_> {
             part_keys,
             stats,
         };
-        let json = serde_json::to_string(&entry).map_err(|e| AggregateError::Corrupt {
-            path: "aggregate entry".into(),
-            reason: e.to_string(),
-        })?;
         self.staged
             .lock()
             .map_err(|_| AggregateError::Tree("staging lock poisoned".into()))?
-            .push((entry.key.clone(), json));
+            .push(entry.clone());
         Ok(entry)
     }
 
@@ -122,9 +142,25 @@ impl AggregateStore for AggregateSink<'_> {
                 .map_err(|_| AggregateError::Tree("staging lock poisoned".into()))?,
         );
         self.blobs.commit_staged().map_err(store_error)?;
+        let rows = staged
+            .iter()
+            .map(|e| {
+                serde_json::to_string(e)
+                    .map(|json| (e.key.clone(), json))
+                    .map_err(|e| AggregateError::Corrupt {
+                        path: "aggregate entry".into(),
+                        reason: e.to_string(),
+                    })
+            })
+            .collect::<Result<Vec<_>, _>>()?;
         self.meta
-            .put_aggregate_entries(&staged)
-            .map_err(store_error)
+            .put_aggregate_entries(&rows)
+            .map_err(store_error)?;
+        self.committed
+            .lock()
+            .map_err(|_| AggregateError::Tree("commit lock poisoned".into()))?
+            .extend(staged);
+        Ok(())
     }
 
     fn parts(&self, hash: &str) -> Result<Vec<u8>, AggregateError> {

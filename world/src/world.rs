@@ -34,7 +34,7 @@ use horizon_mesh::InstancedMesh;
 use rayon::prelude::*;
 use serde::Serialize;
 
-use crate::aggregates::{named_blobs, recorded_entries, AggregateSink};
+use crate::aggregates::{named_blobs, recorded_entries, stored_entries, AggregateSink};
 use crate::error::WorldError;
 use crate::hash::content_hash;
 use crate::ingest::{describe_stored, import_upload, normalise, stats, UploadLimits};
@@ -75,6 +75,12 @@ pub struct World {
     writer: Mutex<()>,
     tree: RwLock<Option<Tree>>,
     status: Mutex<Status>,
+    /// Published manifests read or written, by blob hash (the current one and the one
+    /// before it are what the service reads).
+    manifests: Mutex<HashMap<String, Arc<AggregateManifest>>>,
+    /// The recorded aggregate entries whose blobs are stored, by key, once read: the
+    /// rebuild's reuse index, kept in step with what builds commit and collection removes.
+    entries: Mutex<Option<HashMap<String, horizon_aggregate::AggregateEntry>>>,
     /// Signalled on every committed mutation and publish.
     changed: Condvar,
 }
@@ -263,6 +269,8 @@ impl World {
             writer: Mutex::new(()),
             tree: RwLock::new(None),
             status: Mutex::new(Status::default()),
+            manifests: Mutex::new(HashMap::new()),
+            entries: Mutex::new(None),
             changed: Condvar::new(),
         })
     }
@@ -795,21 +803,49 @@ impl World {
     // ---------------------------------------------------------------------------------------
 
     /// The manifest being served.
-    pub fn published_manifest(&self) -> Result<Option<AggregateManifest>, WorldError> {
+    pub fn published_manifest(&self) -> Result<Option<Arc<AggregateManifest>>, WorldError> {
         let published = self.lock_status()?.published.clone();
         self.read_manifest(published.manifest.as_deref())
     }
 
-    fn read_manifest(&self, hash: Option<&str>) -> Result<Option<AggregateManifest>, WorldError> {
+    fn read_manifest(
+        &self,
+        hash: Option<&str>,
+    ) -> Result<Option<Arc<AggregateManifest>>, WorldError> {
         let Some(hash) = hash else {
             return Ok(None);
         };
+        if let Some(m) = self.lock_manifests()?.get(hash) {
+            return Ok(Some(m.clone()));
+        }
         let bytes = self.blobs.get(hash)?.ok_or_else(|| {
             WorldError::Inconsistent(format!("the published manifest {hash} is missing"))
         })?;
-        serde_json::from_slice(&bytes)
-            .map(Some)
-            .map_err(|e| WorldError::Inconsistent(format!("manifest {hash}: {e}")))
+        let manifest: AggregateManifest = serde_json::from_slice(&bytes)
+            .map_err(|e| WorldError::Inconsistent(format!("manifest {hash}: {e}")))?;
+        let manifest = Arc::new(manifest);
+        self.lock_manifests()?
+            .insert(hash.to_owned(), manifest.clone());
+        Ok(Some(manifest))
+    }
+
+    fn lock_manifests(
+        &self,
+    ) -> Result<MutexGuard<'_, HashMap<String, Arc<AggregateManifest>>>, WorldError> {
+        self.manifests
+            .lock()
+            .map_err(|_| WorldError::Inconsistent("manifest cache lock poisoned".into()))
+    }
+
+    fn lock_entries(
+        &self,
+    ) -> Result<
+        MutexGuard<'_, Option<HashMap<String, horizon_aggregate::AggregateEntry>>>,
+        WorldError,
+    > {
+        self.entries
+            .lock()
+            .map_err(|_| WorldError::Inconsistent("entry cache lock poisoned".into()))
     }
 
     /// The rebuild: a copy of the tree at the current generation gets every node's aggregate
@@ -841,20 +877,36 @@ impl World {
             .ok_or_else(|| WorldError::NotBuilt(self.root.clone()))?;
         let generation = tree.generation;
         let previous = self.lock_status()?.published.clone();
+        let known = {
+            let mut entries = self.lock_entries()?;
+            if entries.is_none() {
+                *entries = Some(stored_entries(self.meta.as_ref(), self.blobs.as_ref())?);
+            }
+            entries.clone().unwrap_or_default()
+        };
         let sink = AggregateSink::new(
             self.meta.as_ref(),
             self.blobs.as_ref(),
-            self.read_manifest(previous.manifest.as_deref())?,
-        );
+            self.read_manifest(previous.manifest.as_deref())?
+                .map(|m| (*m).clone()),
+        )
+        .with_known(known);
         let build = BuildOptions {
             aggregate: options,
             world_textures: self.models.texture_totals()?,
         };
         let outcome =
-            build_aggregates_until(&tree.bvh, &self.models, &sink, &build, progress, stop)?;
+            build_aggregates_until(&tree.bvh, &self.models, &sink, &build, progress, stop);
+        // What the build committed is reusable whether or not it finished.
+        if let Some(entries) = self.lock_entries()?.as_mut() {
+            entries.extend(sink.committed().into_iter().map(|e| (e.key.clone(), e)));
+        }
+        let outcome = outcome?;
         let manifest_bytes = serde_json::to_vec(&outcome.manifest)
             .map_err(|e| WorldError::Inconsistent(e.to_string()))?;
         let manifest = self.blobs.put(&manifest_bytes)?;
+        self.lock_manifests()?
+            .insert(manifest.clone(), Arc::new(outcome.manifest.clone()));
         let published = Published {
             generation,
             manifest: Some(manifest.clone()),
@@ -900,9 +952,15 @@ impl World {
             keys.extend(previous.nodes.values().map(|e| e.key.clone()));
         }
         let mut removed = 0;
-        for entry in recorded_entries(self.meta.as_ref())? {
+        let kept: HashSet<&String> = keys.iter().collect();
+        let mut entries = self.lock_entries()?;
+        let recorded = match entries.as_ref() {
+            Some(map) => map.values().cloned().collect(),
+            None => recorded_entries(self.meta.as_ref())?,
+        };
+        for entry in recorded.iter().filter(|e| !kept.contains(&e.key)) {
             for hash in std::iter::once(&entry.glb).chain(entry.parts.as_ref()) {
-                if !keep.contains(hash) && self.blobs.size(hash)?.is_some() {
+                if !keep.contains(hash) {
                     self.blobs.delete(hash)?;
                     keep.insert(hash.clone());
                     removed += 1;
@@ -910,6 +968,15 @@ impl World {
             }
         }
         self.meta.retain_aggregate_entries(&keys)?;
+        if let Some(map) = entries.as_mut() {
+            map.retain(|k, _| kept.contains(k));
+        }
+        // Only the two published manifests are read again.
+        let names: HashSet<&String> = [&published.manifest, &published.previous_manifest]
+            .into_iter()
+            .flatten()
+            .collect();
+        self.lock_manifests()?.retain(|k, _| names.contains(k));
         Ok(removed)
     }
 
@@ -968,6 +1035,8 @@ impl World {
         self.meta.publish(&unpublished)?;
         self.lock_status()?.published = unpublished;
         self.meta.retain_aggregate_entries(&[])?;
+        *self.lock_entries()? = Some(HashMap::new());
+        self.lock_manifests()?.clear();
         let models: HashSet<String> = self.models.rows()?.into_iter().map(|r| r.asset).collect();
         for hash in hashes.difference(&models) {
             self.blobs.delete(hash)?;

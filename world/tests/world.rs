@@ -197,7 +197,7 @@ fn check_published(world: &World) -> AggregateManifest {
             );
         }
     }
-    manifest
+    (*manifest).clone()
 }
 
 /// Everything that says which tree a world holds: the BVH itself as JSON, its generation,
