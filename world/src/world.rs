@@ -41,8 +41,8 @@ use crate::ingest::{describe_stored, import_upload, normalise, stats, UploadLimi
 use crate::legacy::{is_legacy, LegacyWorld};
 use crate::models::Models;
 use crate::store::{
-    Applied, BlobDir, BlobStore, MetaStore, ModelRow, Mutation, NewModel, ObjectRow, Published,
-    Snapshot, SqliteMeta, User,
+    Applied, BlobDir, BlobStore, MetaStore, ModelDescriptors, ModelRow, Mutation, NewModel,
+    ObjectRow, Published, Snapshot, SqliteMeta, User,
 };
 use crate::tree::{Describe, Tree};
 
@@ -183,7 +183,9 @@ impl World {
             .collect::<Result<_, WorldError>>()?;
         let mut numbers = Vec::with_capacity(models.len());
         for ((model_name, _), (glb, stats)) in models.iter().zip(&stored) {
-            let row = world.store_model(glb, glb, model_name, None, stats)?.0;
+            let row = world
+                .store_model(glb, glb, model_name, None, stats, None)?
+                .0;
             numbers.push(row.number);
         }
         let mutations: Vec<Mutation> = objects
@@ -312,10 +314,8 @@ impl World {
                     owner: None,
                     bytes: glb.len() as u64,
                     stats,
+                    descriptors: legacy.descriptors.get(&m.hash),
                 })?;
-                if let Some(d) = legacy.descriptors.get(&m.hash) {
-                    meta.put_descriptors(&asset, d)?;
-                }
                 numbers.insert(m.hash.as_str(), row.number);
             }
             let mutations: Vec<Mutation> = legacy
@@ -387,6 +387,7 @@ impl World {
         name: &str,
         owner: Option<&str>,
         stats: &serde_json::Value,
+        descriptors: Option<&ModelDescriptors>,
     ) -> Result<(ModelRow, bool), WorldError> {
         let _storing = self
             .storing
@@ -401,6 +402,7 @@ impl World {
             owner,
             bytes: glb.len() as u64,
             stats,
+            descriptors,
         });
         let (row, created) = match added {
             Ok(added) => added,
@@ -435,11 +437,18 @@ impl World {
         let glb = normalise(name, &ingested.mesh)?;
         self.meta.check_model_quota(owner, glb.len() as u64)?;
         let asset = content_hash(&glb);
-        if self.meta.descriptors(&asset)?.is_none() {
-            let d = describe_stored(name, &glb)?;
-            self.meta.put_descriptors(&asset, &d)?;
-        }
-        self.store_model(bytes, &glb, name, Some(owner), &stats(&ingested.mesh))
+        let described = match self.meta.descriptors(&asset)? {
+            Some(_) => None,
+            None => Some(describe_stored(name, &glb)?),
+        };
+        self.store_model(
+            bytes,
+            &glb,
+            name,
+            Some(owner),
+            &stats(&ingested.mesh),
+            described.as_ref(),
+        )
     }
 
     /// The model with this id.

@@ -56,6 +56,7 @@ fn add(
     let id = content_hash(tag.as_bytes());
     let asset = content_hash(format!("glb of {tag}").as_bytes());
     meta.add_model(NewModel {
+        descriptors: None,
         id: &id,
         asset: &asset,
         name: tag,

@@ -243,4 +243,6 @@ pub struct NewModel<'a> {
     pub bytes: u64,
     /// What it holds.
     pub stats: &'a serde_json::Value,
+    /// Its descriptors, recorded in the same transaction if given.
+    pub descriptors: Option<&'a ModelDescriptors>,
 }

@@ -163,6 +163,9 @@ impl MetaStore for SqliteMeta {
             ],
         )
         .map_err(sql)?;
+        if let Some(d) = m.descriptors {
+            insert_descriptors(&tx, m.asset, d)?;
+        }
         let row = model_by_id(&tx, m.id)?
             .ok_or_else(|| WorldError::Inconsistent("a model vanished on insert".into()))?;
         tx.commit().map_err(sql)?;
@@ -243,19 +246,7 @@ impl MetaStore for SqliteMeta {
 
     fn put_descriptors(&self, asset: &str, d: &ModelDescriptors) -> Result<(), WorldError> {
         let db = self.lock()?;
-        db.execute(
-            "INSERT OR REPLACE INTO descriptors (asset, zernike, csd, centre, radius)
-             VALUES (?1, ?2, ?3, ?4, ?5)",
-            params![
-                asset,
-                bytes_of(&d.zernike),
-                bytes_of(&d.csd),
-                bytes_of(&d.centre),
-                f64::from(d.radius)
-            ],
-        )
-        .map_err(sql)?;
-        Ok(())
+        insert_descriptors(&db, asset, d)
     }
 
     fn apply(
@@ -642,6 +633,27 @@ fn owned_object(
         }
     }
     Ok(row)
+}
+
+/// Records the descriptors of a stored GLB.
+fn insert_descriptors(
+    db: &Connection,
+    asset: &str,
+    d: &ModelDescriptors,
+) -> Result<(), WorldError> {
+    db.execute(
+        "INSERT OR REPLACE INTO descriptors (asset, zernike, csd, centre, radius)
+         VALUES (?1, ?2, ?3, ?4, ?5)",
+        params![
+            asset,
+            bytes_of(&d.zernike),
+            bytes_of(&d.csd),
+            bytes_of(&d.centre),
+            f64::from(d.radius)
+        ],
+    )
+    .map_err(sql)?;
+    Ok(())
 }
 
 /// Refuses a model of `bytes` for `owner` past their `max_bytes`.
