@@ -1,8 +1,11 @@
 //! The embedded stores through their traits: [`SqliteMeta`] as a [`MetaStore`] and [`BlobDir`]
 //! as a [`BlobStore`], each on a temporary folder.
 
-use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicU64, Ordering};
+mod common;
+
+use common::TempDir;
+
+use std::path::Path;
 
 use glam::{Affine3A, Vec3};
 use horizon_world::store::{Mutation, NewModel, Snapshot};
@@ -10,33 +13,6 @@ use horizon_world::{
     content_hash, is_content_hash, Applied, BlobDir, BlobStore, MetaStore, ModelDescriptors,
     Published, SqliteMeta, User, WorldError,
 };
-
-/// A fresh, empty folder under the system's temporary folder, removed on drop.
-struct TempDir(PathBuf);
-
-impl TempDir {
-    fn new(tag: &str) -> Self {
-        static N: AtomicU64 = AtomicU64::new(0);
-        let path = std::env::temp_dir().join(format!(
-            "horizon-store-{tag}-{}-{}",
-            std::process::id(),
-            N.fetch_add(1, Ordering::Relaxed)
-        ));
-        let _ = std::fs::remove_dir_all(&path);
-        std::fs::create_dir_all(&path).expect("temp dir");
-        Self(path)
-    }
-
-    fn path(&self) -> &Path {
-        &self.0
-    }
-}
-
-impl Drop for TempDir {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
-}
 
 fn meta(dir: &TempDir) -> SqliteMeta {
     SqliteMeta::open(&dir.path().join("world.db"), "test", 7).expect("open the database")
@@ -91,7 +67,7 @@ fn user(name: &str, max_objects: Option<u64>, max_bytes: Option<u64>) -> User {
 
 #[test]
 fn a_new_database_records_its_identity_at_generation_zero() {
-    let dir = TempDir::new("identity");
+    let dir = TempDir::created("identity");
     let m = meta(&dir);
     assert_eq!(m.identity().expect("identity"), ("test".to_owned(), 7));
     assert_eq!(m.generation().expect("generation"), 0);
@@ -108,7 +84,7 @@ fn a_new_database_records_its_identity_at_generation_zero() {
 
 #[test]
 fn add_model_adds_once_and_numbers_densely_from_zero() {
-    let dir = TempDir::new("models");
+    let dir = TempDir::created("models");
     let m = meta(&dir);
     let (a, added) = add(&m, "a", None, 100).expect("add a");
     assert!(added);
@@ -156,7 +132,7 @@ fn add_model_adds_once_and_numbers_densely_from_zero() {
 
 #[test]
 fn descriptors_round_trip() {
-    let dir = TempDir::new("descriptors");
+    let dir = TempDir::created("descriptors");
     let m = meta(&dir);
     let d = ModelDescriptors {
         zernike: (0..121).map(|i| i as f32 * 0.5).collect(),
@@ -172,7 +148,7 @@ fn descriptors_round_trip() {
 
 #[test]
 fn max_bytes_is_checked_when_a_user_adds_a_model() {
-    let dir = TempDir::new("max-bytes");
+    let dir = TempDir::created("max-bytes");
     let m = meta(&dir);
     m.add_token(&user("ann", None, Some(100)), &content_hash(b"t1"))
         .expect("token");
@@ -203,7 +179,7 @@ fn max_bytes_is_checked_when_a_user_adds_a_model() {
 
 #[test]
 fn check_model_quota_refuses_what_add_model_would() {
-    let dir = TempDir::new("check-quota");
+    let dir = TempDir::created("check-quota");
     let m = meta(&dir);
     m.add_token(&user("ann", None, Some(100)), &content_hash(b"t1"))
         .expect("token");
@@ -221,7 +197,7 @@ fn check_model_quota_refuses_what_add_model_would() {
 
 #[test]
 fn apply_makes_one_generation_per_mutation_and_logs_them_in_order() {
-    let dir = TempDir::new("apply");
+    let dir = TempDir::created("apply");
     let m = meta(&dir);
     add(&m, "a", None, 1).expect("a");
     add(&m, "b", None, 1).expect("b");
@@ -287,7 +263,7 @@ fn apply_makes_one_generation_per_mutation_and_logs_them_in_order() {
 
 #[test]
 fn objects_page_in_id_order_and_by_owner() {
-    let dir = TempDir::new("pages");
+    let dir = TempDir::created("pages");
     let m = meta(&dir);
     add(&m, "a", None, 1).expect("a");
     let mut all = Vec::new();
@@ -343,7 +319,7 @@ fn refused(
 
 #[test]
 fn a_refused_mutation_applies_nothing_of_its_batch() {
-    let dir = TempDir::new("refused");
+    let dir = TempDir::created("refused");
     let m = meta(&dir);
     add(&m, "a", None, 1).expect("a");
     m.add_token(&user("ann", Some(3), None), &content_hash(b"ann"))
@@ -458,7 +434,7 @@ fn a_refused_mutation_applies_nothing_of_its_batch() {
 fn object_ids_are_never_reused() {
     // An object's id names it for good (DESIGN: the entry id `o:<id>` never names two
     // different contents): deleting the newest object must not hand its id to the next one.
-    let dir = TempDir::new("ids");
+    let dir = TempDir::created("ids");
     let m = meta(&dir);
     add(&m, "a", None, 1).expect("a");
     let ids: Vec<u64> = m
@@ -485,7 +461,7 @@ fn object_ids_are_never_reused() {
 
 #[test]
 fn tokens_name_their_users_and_limits() {
-    let dir = TempDir::new("tokens");
+    let dir = TempDir::created("tokens");
     let m = meta(&dir);
     let (t1, t2, t3) = (content_hash(b"1"), content_hash(b"2"), content_hash(b"3"));
     assert_eq!(m.user_of_token(&t1).expect("lookup"), None);
@@ -520,7 +496,7 @@ fn tokens_name_their_users_and_limits() {
 
 #[test]
 fn aggregate_entries_are_put_and_retained() {
-    let dir = TempDir::new("entries");
+    let dir = TempDir::created("entries");
     let m = meta(&dir);
     assert!(m.aggregate_entries().expect("none").is_empty());
     let entries: Vec<(String, String)> = (0..5)
@@ -555,7 +531,7 @@ fn aggregate_entries_are_put_and_retained() {
 
 #[test]
 fn publish_replaces_what_is_published_durably() {
-    let dir = TempDir::new("publish");
+    let dir = TempDir::created("publish");
     let m = meta(&dir);
     let first = Published {
         generation: 3,
@@ -578,7 +554,7 @@ fn publish_replaces_what_is_published_durably() {
 
 #[test]
 fn put_snapshot_trims_the_log_up_to_its_generation() {
-    let dir = TempDir::new("snapshot");
+    let dir = TempDir::created("snapshot");
     let m = meta(&dir);
     add(&m, "a", None, 1).expect("a");
     let applied = m
@@ -634,7 +610,7 @@ fn files(root: &Path) -> Vec<String> {
 
 #[test]
 fn blobs_put_get_size_delete_list() {
-    let dir = TempDir::new("blobs");
+    let dir = TempDir::created("blobs");
     let blobs = BlobDir::new(&dir.path().join("blobs"));
     assert!(blobs.list().expect("list of nothing").is_empty());
     let a = blobs.put(b"alpha").expect("put");
@@ -670,7 +646,7 @@ fn blobs_put_get_size_delete_list() {
 
 #[test]
 fn staged_blobs_appear_only_when_committed() {
-    let dir = TempDir::new("stage");
+    let dir = TempDir::created("stage");
     let root = dir.path().join("blobs");
     let blobs = BlobDir::new(&root);
     let kept = blobs.put(b"already stored").expect("put");
@@ -703,7 +679,7 @@ fn staged_blobs_appear_only_when_committed() {
 
 #[test]
 fn a_name_that_is_not_a_content_hash_finds_nothing_and_stays_inside() {
-    let dir = TempDir::new("names");
+    let dir = TempDir::created("names");
     let root = dir.path().join("blobs");
     let blobs = BlobDir::new(&root);
     let a = blobs.put(b"inside").expect("put");
@@ -748,7 +724,7 @@ fn a_name_that_is_not_a_content_hash_finds_nothing_and_stays_inside() {
 
 #[test]
 fn sweep_removes_temporary_files_and_nothing_else() {
-    let dir = TempDir::new("sweep");
+    let dir = TempDir::created("sweep");
     let root = dir.path().join("blobs");
     let blobs = BlobDir::new(&root);
     assert_eq!(blobs.sweep().expect("sweep of nothing"), 0);
@@ -773,7 +749,7 @@ fn sweep_removes_temporary_files_and_nothing_else() {
 
 #[test]
 fn concurrent_puts_of_the_same_bytes_store_one_blob() {
-    let dir = TempDir::new("concurrent");
+    let dir = TempDir::created("concurrent");
     let root = dir.path().join("blobs");
     let blobs = BlobDir::new(&root);
     let bytes: Vec<u8> = (0..200_000u32).map(|i| (i % 251) as u8).collect();

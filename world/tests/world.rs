@@ -2,6 +2,10 @@
 //! rebuild and its publication, replay after a reopen, garbage collection, the format-1
 //! upgrade, uploads, and opening folders that hold no world.
 
+mod common;
+
+use common::TempDir;
+
 use std::collections::{BTreeMap, BTreeSet, HashSet};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -16,32 +20,6 @@ use horizon_world::{BadModel, Change, RebuildReport, User, World, WorldError};
 // -------------------------------------------------------------------------------------------
 // Helpers
 // -------------------------------------------------------------------------------------------
-
-/// A fresh path under the system's temporary folder (not created), removed on drop.
-struct TempDir(PathBuf);
-
-impl TempDir {
-    fn new(tag: &str) -> Self {
-        static N: AtomicU64 = AtomicU64::new(0);
-        let path = std::env::temp_dir().join(format!(
-            "horizon-world-{tag}-{}-{}",
-            std::process::id(),
-            N.fetch_add(1, Ordering::Relaxed)
-        ));
-        let _ = std::fs::remove_dir_all(&path);
-        Self(path)
-    }
-
-    fn path(&self) -> &Path {
-        &self.0
-    }
-}
-
-impl Drop for TempDir {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
-}
 
 /// A mesh of one submesh, placed once, in one colour.
 fn mesh(positions: Vec<Vec3>, indices: Vec<u32>, color: [f32; 4]) -> InstancedMesh {
