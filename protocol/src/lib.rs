@@ -7,19 +7,28 @@
 //! - `error.rs`: [`ErrorBody`] and [`ErrorCode`], with each code's HTTP status.
 //! - `world.rs`: [`WorldInfo`], what `GET /v1/world` answers.
 //! - `models.rs`: [`ModelInfo`] and its page.
+//! - `cut.rs`: [`View`], [`CutResponse`] and its [`Entry`]s.
+//! - `stream.rs`: the WebSocket's [`ClientMessage`] and [`ServerMessage`].
 //! - `objects.rs`: [`NewObject`], [`ObjectPatch`], [`ObjectInfo`], the batch and pages.
 
+mod cut;
 mod error;
 mod models;
 mod objects;
+mod stream;
 mod world;
 
+pub use cut::{
+    Asset, AssetRole, Budgets, CutResponse, Entry, EntryKind, Placement, StoppedBy, View,
+    DEFAULT_MAX_ENTRIES, DEFAULT_MIN_SOLID_ANGLE, DEFAULT_PIXEL_SOLID_ANGLE, MAX_ENTRIES_LIMIT,
+};
 pub use error::{ErrorBody, ErrorCode, ErrorDetail};
 pub use models::{ModelInfo, ModelPage};
 pub use objects::{
     BatchOp, BatchRequest, BatchResponse, Created, Deleted, NewObject, ObjectInfo, ObjectPage,
     ObjectPatch, Scale,
 };
+pub use stream::{Addition, ClientMessage, Removal, RemoveReason, ServerMessage};
 pub use world::{Bounds, WorldInfo};
 
 /// The default size of a page of `GET /v1/objects` and `GET /v1/models`.

@@ -1,0 +1,218 @@
+//! `GET /v1/stream`: a standing query over WebSocket, JSON text frames (`DESIGN.md`,
+//! "WebSocket messages").
+//!
+//! The client sends [`ClientMessage::View`] whenever it likes and [`ClientMessage::Ack`] for
+//! what it has applied. The server answers with a [`ServerMessage::Reset`] (the whole cut),
+//! then [`ServerMessage::Delta`]s, each atomic and numbered by `seq`, which starts at 1 and
+//! rises by one per reset or delta. Applied in order, the deltas keep the client's cut equal
+//! to a one-shot `GET /v1/cut` at the same view and generation.
+
+use serde::{Deserialize, Serialize};
+
+use crate::cut::{Entry, View};
+use crate::error::ErrorDetail;
+
+/// A message from the client.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "type", rename_all = "snake_case")]
+pub enum ClientMessage {
+    /// Where the viewer is now; replaces every earlier view.
+    View {
+        /// The client's number for this view, echoed by the reply that applies it.
+        id: u64,
+        /// The view.
+        #[serde(flatten)]
+        view: View,
+    },
+    /// The client has applied every message up to `seq`.
+    Ack {
+        /// The last `seq` applied.
+        seq: u64,
+    },
+}
+
+/// Why an entry left a client's cut.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RemoveReason {
+    /// Replaced by finer entries (the viewer came closer).
+    Refined,
+    /// Replaced by a coarser entry (the viewer went away).
+    Coarsened,
+    /// Its object left the world.
+    Deleted,
+    /// Replaced by a new version of the same thing (a rebuilt aggregate, a moved object).
+    Replaced,
+}
+
+/// One entry leaving a client's cut.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Removal {
+    /// The entry's id.
+    pub id: String,
+    /// Why.
+    pub reason: RemoveReason,
+}
+
+/// An entry joining a client's cut, with the entries it takes the place of: a client keeps
+/// drawing those until this one has loaded (load before drop).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Addition {
+    /// The entry.
+    #[serde(flatten)]
+    pub entry: Entry,
+    /// Ids of removed entries that drew what this one draws.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub replaces: Vec<String>,
+}
+
+/// A message from the server.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "type", rename_all = "snake_case")]
+pub enum ServerMessage {
+    /// The whole cut: drop everything held and take these entries.
+    Reset {
+        /// This message's number.
+        seq: u64,
+        /// The id of the last view applied.
+        view: u64,
+        /// As in [`crate::CutResponse`].
+        generation: u64,
+        /// As in [`crate::CutResponse`].
+        published: u64,
+        /// As in [`crate::CutResponse`].
+        objects: u64,
+        /// The cut.
+        entries: Vec<Entry>,
+        /// As in [`crate::CutResponse`].
+        stopped_by: Option<crate::StoppedBy>,
+    },
+    /// The change from the cut before to the cut now, applied as one step: removals, then
+    /// additions.
+    Delta {
+        /// This message's number.
+        seq: u64,
+        /// The id of the last view applied.
+        view: u64,
+        /// As in [`crate::CutResponse`].
+        generation: u64,
+        /// As in [`crate::CutResponse`].
+        published: u64,
+        /// As in [`crate::CutResponse`].
+        objects: u64,
+        /// New entries.
+        add: Vec<Addition>,
+        /// Entries gone.
+        remove: Vec<Removal>,
+        /// As in [`crate::CutResponse`].
+        stopped_by: Option<crate::StoppedBy>,
+    },
+    /// A bad message; the connection goes on.
+    Error {
+        /// What was wrong.
+        error: ErrorDetail,
+    },
+}
+
+impl ServerMessage {
+    /// The `seq` of a reset or delta.
+    pub fn seq(&self) -> Option<u64> {
+        match self {
+            Self::Reset { seq, .. } | Self::Delta { seq, .. } => Some(*seq),
+            Self::Error { .. } => None,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cut::Budgets;
+
+    #[test]
+    fn a_view_message_parses_with_defaults_and_checks() {
+        let m: ClientMessage =
+            serde_json::from_str(r#"{"type": "view", "id": 17, "eye": [1, 2, 3]}"#).expect("parse");
+        let ClientMessage::View { id, view } = m else {
+            panic!("not a view: {m:?}");
+        };
+        assert_eq!(id, 17);
+        assert_eq!(view, View::at([1.0, 2.0, 3.0]));
+        assert_eq!(view.check(), Ok(()));
+        let with_budget: ClientMessage = serde_json::from_str(
+            r#"{"type": "view", "id": 1, "eye": [0, 0, 0], "min_solid_angle": 0.01,
+                "budgets": {"max_entries": 10, "max_bytes": 5}}"#,
+        )
+        .expect("parse");
+        let ClientMessage::View { view, .. } = with_budget else {
+            panic!("not a view");
+        };
+        assert_eq!(view.min_solid_angle, 0.01);
+        assert_eq!(
+            view.budgets,
+            Budgets {
+                max_entries: Some(10),
+                max_bytes: Some(5),
+                ..Budgets::default()
+            }
+        );
+    }
+
+    #[test]
+    fn bad_views_are_refused() {
+        for bad in [
+            r#"{"type": "look", "id": 1, "eye": [0, 0, 0]}"#,
+            r#"{"type": "view", "id": 1}"#,
+            r#"{"type": "view", "id": 1, "eye": [0, 0]}"#,
+            r#"{"type": "view", "id": -1, "eye": [0, 0, 0]}"#,
+            r#"{"type": "view", "id": 1, "eye": [0, 0, 0], "budgets": {"max_entries": -4}}"#,
+            r#"{"type": "view", "id": 1, "eye": [0, 0, 0], "budgets": {"max_things": 4}}"#,
+            r#"{"type": "ack"}"#,
+        ] {
+            assert!(
+                serde_json::from_str::<ClientMessage>(bad).is_err(),
+                "{bad} parsed"
+            );
+        }
+        let mut view = View::at([0.0, 0.0, 0.0]);
+        assert_eq!(view.check(), Ok(()));
+        view.min_solid_angle = 13.0;
+        assert!(view.check().is_err());
+        view.min_solid_angle = 0.0;
+        assert!(view.check().is_err());
+        view = View::at([f64::NAN, 0.0, 0.0]);
+        assert!(view.check().is_err());
+        view = View::at([0.0, 0.0, 0.0]);
+        view.pixel_solid_angle = f64::INFINITY;
+        assert!(view.check().is_err());
+        view = View::at([0.0, 0.0, 0.0]);
+        view.budgets.max_triangles = Some(0);
+        assert!(view.check().is_err());
+        view.budgets.max_triangles = None;
+        view.budgets.max_entries = Some(crate::MAX_ENTRIES_LIMIT + 1);
+        assert!(view.check().is_err());
+    }
+
+    #[test]
+    fn server_messages_carry_their_type_tag() {
+        let m = ServerMessage::Delta {
+            seq: 2,
+            view: 17,
+            generation: 5,
+            published: 4,
+            objects: 10,
+            add: Vec::new(),
+            remove: vec![Removal {
+                id: "o:3@5".into(),
+                reason: RemoveReason::Deleted,
+            }],
+            stopped_by: None,
+        };
+        let json = serde_json::to_value(&m).expect("serialise");
+        assert_eq!(json["type"], "delta");
+        assert_eq!(json["remove"][0]["reason"], "deleted");
+        assert_eq!(m.seq(), Some(2));
+        let back: ServerMessage = serde_json::from_value(json).expect("parse");
+        assert_eq!(back, m);
+    }
+}
