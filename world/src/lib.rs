@@ -42,4 +42,4 @@ pub use store::{
     SqliteMeta, User,
 };
 pub use tree::{new_object, sphere_of, Describe, Tree};
-pub use world::{Change, RebuildReport, World, WorldStatus, SNAPSHOT_EVERY};
+pub use world::{Change, RebuildReport, Served, World, WorldStatus, SNAPSHOT_EVERY};

@@ -8,7 +8,7 @@
 //! held: the same nodes, hence the same aggregate keys, so nothing built is rebuilt after a
 //! restart.
 
-use std::collections::{BTreeMap, HashMap};
+use std::collections::{BTreeMap, BTreeSet, HashMap};
 
 use glam::{Affine3A, Vec3};
 use horizon_bvh::{Bvh, NewObject, NodeId, ObjectId, Sphere};
@@ -31,6 +31,11 @@ pub struct Tree {
     ids: BTreeMap<u64, ObjectId>,
     /// Tree object id -> world object id.
     back: HashMap<ObjectId, u64>,
+    /// World object id -> the generation that last placed or moved it.
+    placed: HashMap<u64, u64>,
+    /// The same, ordered by generation: the objects placed after a generation (the pending
+    /// objects of a cut) are a range of it.
+    by_generation: BTreeSet<(u64, u64)>,
 }
 
 /// What a snapshot stores.
@@ -88,7 +93,45 @@ impl Tree {
             generation,
             ids,
             back,
+            placed: HashMap::new(),
+            by_generation: BTreeSet::new(),
         }
+    }
+
+    /// Records, for each `(world id, generation)`, the generation that last placed or moved
+    /// the object: the metadata store knows it, the snapshot does not. [`Tree::apply`] keeps
+    /// it from then on.
+    pub fn set_placed(&mut self, placed: impl IntoIterator<Item = (u64, u64)>) {
+        self.placed.clear();
+        self.by_generation.clear();
+        for (object, generation) in placed {
+            self.place(object, generation);
+        }
+    }
+
+    fn place(&mut self, object: u64, generation: u64) {
+        if let Some(old) = self.placed.insert(object, generation) {
+            self.by_generation.remove(&(old, object));
+        }
+        self.by_generation.insert((generation, object));
+    }
+
+    fn unplace(&mut self, object: u64) {
+        if let Some(old) = self.placed.remove(&object) {
+            self.by_generation.remove(&(old, object));
+        }
+    }
+
+    /// The generation that last placed or moved a world object (0 if unknown).
+    pub fn placed(&self, object: u64) -> u64 {
+        self.placed.get(&object).copied().unwrap_or(0)
+    }
+
+    /// The world ids of the objects placed or moved after `generation`.
+    pub fn placed_after(&self, generation: u64) -> impl Iterator<Item = u64> + '_ {
+        self.by_generation
+            .range((generation.saturating_add(1), 0)..)
+            .map(|&(_, object)| object)
     }
 
     /// Applies one committed change; returns the nodes whose contents it changed (the
@@ -111,18 +154,21 @@ impl Tree {
                 let id = self.bvh.insert(&new_object(model, transform, &d))?;
                 self.ids.insert(change.object, id);
                 self.back.insert(id, change.object);
+                self.place(change.object, change.generation);
                 touched.extend(self.ancestors(id));
             }
             (Some((model, transform)), Some(id)) => {
                 let d = descriptors.descriptors_of(model)?;
                 let sphere = sphere_of(transform, &d);
                 self.bvh.move_object(id, transform, sphere)?;
+                self.place(change.object, change.generation);
                 touched.extend(self.ancestors(id));
             }
             (None, Some(id)) => {
                 self.bvh.remove(id)?;
                 self.ids.remove(&change.object);
                 self.back.remove(&id);
+                self.unplace(change.object);
             }
             (None, None) => {
                 return Err(WorldError::Inconsistent(format!(

@@ -83,6 +83,19 @@ pub struct World {
     entries: Mutex<Option<HashMap<String, horizon_aggregate::AggregateEntry>>>,
     /// Signalled on every committed mutation and publish.
     changed: Condvar,
+    /// Called after every committed mutation and publish ([`World::on_change`]).
+    listeners: Listeners,
+}
+
+/// The functions told of every committed mutation and publish.
+#[derive(Default)]
+struct Listeners(RwLock<Vec<Box<dyn Fn() + Send + Sync>>>);
+
+impl std::fmt::Debug for Listeners {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let n = self.0.read().map_or(0, |l| l.len());
+        write!(f, "Listeners({n})")
+    }
 }
 
 /// What changes between rebuilds.
@@ -100,6 +113,17 @@ struct Status {
     last_change: Option<Instant>,
     /// The snapshot's generation.
     snapshot: u64,
+}
+
+/// What a cut reads ([`World::with_served`]).
+#[derive(Debug)]
+pub struct Served<'a> {
+    /// The tree at the last committed generation.
+    pub tree: &'a Tree,
+    /// The generation whose aggregates are served.
+    pub published: u64,
+    /// Its manifest (none before the first rebuild).
+    pub manifest: Option<Arc<AggregateManifest>>,
 }
 
 /// A summary of the world, for `GET /v1/world` and the command line.
@@ -274,6 +298,7 @@ impl World {
             manifests: Mutex::new(HashMap::new()),
             entries: Mutex::new(None),
             changed: Condvar::new(),
+            listeners: Listeners::default(),
         })
     }
 
@@ -567,6 +592,7 @@ impl World {
         }
         drop(s);
         self.changed.notify_all();
+        self.tell_listeners();
         Ok(applied)
     }
 
@@ -689,15 +715,16 @@ impl World {
         Ok(options)
     }
 
+    /// Every model, in number order.
+    pub fn all_models(&self) -> Result<Vec<ModelRow>, WorldError> {
+        self.meta.models()
+    }
+
     /// Every object as the bulk build takes it: (world id, model number, transform), in id
     /// order. [`crate::new_object`] makes the BVH's input of one, with the model's
     /// descriptors ([`Describe`] on [`World::models`]).
     pub fn bulk_input(&self) -> Result<Vec<(u64, u64, Affine3A)>, WorldError> {
-        Ok(self
-            .all_objects()?
-            .into_iter()
-            .map(|o| (o.id, o.model, o.transform))
-            .collect())
+        Ok(bulk_input(&self.all_objects()?))
     }
 
     /// Bulk-builds the BVH (section 4.3) of every object with eq. 1's `mu` and `w` and this
@@ -706,12 +733,14 @@ impl World {
         let _writer = self.lock_writer()?;
         self.describe_models(&|_, _| {})?;
         let generation = self.meta.generation()?;
-        let tree = Tree::bulk(
+        let rows = self.all_objects()?;
+        let mut tree = Tree::bulk(
             self.bvh_options(mu, w)?,
-            &self.bulk_input()?,
+            &bulk_input(&rows),
             &self.models,
             generation,
         )?;
+        tree.set_placed(rows.iter().map(|o| (o.id, o.generation)));
         let summary = (tree.bvh.len(), tree.bvh.node_count(), tree.bvh.height());
         self.save_snapshot(&tree)?;
         *self.write_tree()? = Some(tree);
@@ -752,20 +781,23 @@ impl World {
                         touched.extend(nodes.into_iter().map(|n| (n, change.generation)));
                     }
                 }
+                tree.set_placed(self.all_objects()?.iter().map(|o| (o.id, o.generation)));
                 tree
             }
             None => {
                 self.describe_models(&|_, _| {})?;
                 let generation = self.meta.generation()?;
                 let options = self.bvh_options(horizon_bvh::DEFAULT_MU, horizon_bvh::DEFAULT_W)?;
-                let objects = self.bulk_input()?;
-                let tree = if objects.is_empty() {
+                let rows = self.all_objects()?;
+                let objects = bulk_input(&rows);
+                let mut tree = if objects.is_empty() {
                     let mut tree = Tree::empty(options)?;
                     tree.generation = generation;
                     tree
                 } else {
                     Tree::bulk(options, &objects, &self.models, generation)?
                 };
+                tree.set_placed(rows.iter().map(|o| (o.id, o.generation)));
                 // Only the world's holder writes; a reader beside it keeps its tree to itself.
                 if self.is_exclusive() {
                     self.save_snapshot(&tree)?;
@@ -794,6 +826,24 @@ impl World {
     /// angle first under the query's budget.
     pub fn cut(&self, query: &CutQuery) -> Result<Cut, WorldError> {
         self.with_tree(|tree| tree.bvh.cut(query))
+    }
+
+    /// Runs `f` on what a cut reads: the tree at the last committed generation, the
+    /// published generation and its manifest (read before the tree, so the tree is never
+    /// older than the manifest).
+    pub fn with_served<T>(&self, f: impl FnOnce(&Served<'_>) -> T) -> Result<T, WorldError> {
+        self.ensure_tree()?;
+        let published = self.lock_status()?.published.clone();
+        let manifest = self.read_manifest(published.manifest.as_deref())?;
+        let tree = self.read_tree()?;
+        let tree = tree
+            .as_ref()
+            .ok_or_else(|| WorldError::NotBuilt(self.root.clone()))?;
+        Ok(f(&Served {
+            tree,
+            published: published.generation,
+            manifest,
+        }))
     }
 
     /// Stores `tree` as the snapshot, which lets the log before it go.
@@ -935,6 +985,7 @@ impl World {
             }
         }
         self.changed.notify_all();
+        self.tell_listeners();
         let removed_blobs = self.collect_garbage(&outcome.manifest, &published)?;
         if generation.saturating_sub(self.lock_status()?.snapshot) >= SNAPSHOT_EVERY {
             self.save_snapshot(&tree)?;
@@ -1092,6 +1143,22 @@ impl World {
         }
     }
 
+    /// Calls `f` after every committed mutation and publish, from the thread that made it:
+    /// `f` must be quick (a service's streams use it to wake).
+    pub fn on_change(&self, f: impl Fn() + Send + Sync + 'static) {
+        if let Ok(mut listeners) = self.listeners.0.write() {
+            listeners.push(Box::new(f));
+        }
+    }
+
+    fn tell_listeners(&self) {
+        if let Ok(listeners) = self.listeners.0.read() {
+            for f in listeners.iter() {
+                f();
+            }
+        }
+    }
+
     /// Wakes anything waiting in [`World::wait_for_rebuild`] (to see a stop).
     pub fn wake(&self) {
         self.changed.notify_all();
@@ -1162,4 +1229,9 @@ impl World {
             .write()
             .map_err(|_| WorldError::Inconsistent("tree lock poisoned".into()))
     }
+}
+
+/// The bulk build's input of `rows`: (world id, model number, transform).
+fn bulk_input(rows: &[ObjectRow]) -> Vec<(u64, u64, Affine3A)> {
+    rows.iter().map(|o| (o.id, o.model, o.transform)).collect()
 }

@@ -9,12 +9,16 @@
 //! - `auth.rs`: bearer tokens.
 //! - `routes/`: one file per resource: `world.rs`, `models.rs`, `objects.rs`, `assets.rs`,
 //!   `meta.rs` (health, metrics, OpenAPI, the index page).
+//! - `cut.rs`: the served cut, planned under a view's budgets, and the delta between two.
+//! - `stream.rs`: `GET /v1/stream`, standing queries over WebSocket.
 //! - `rebuild.rs`: the background worker that debounces changes and publishes generations.
 
 mod auth;
+pub mod cut;
 mod error;
 mod rebuild;
 mod routes;
+mod stream;
 
 use std::future::Future;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -57,6 +61,42 @@ pub struct Config {
     pub aggregates: AggregateOptions,
     /// Whether `run` starts the rebuild worker. Default true.
     pub rebuild: bool,
+    /// The stream's limits.
+    pub stream: StreamLimits,
+}
+
+/// The limits of `GET /v1/stream`. Going over one closes the connection with 1008 (policy)
+/// or 1009 (too big), the reason being the error code.
+#[derive(Clone, Copy, Debug)]
+pub struct StreamLimits {
+    /// Largest client message, bytes. Default 64 KiB.
+    pub max_message_bytes: usize,
+    /// Messages per second a connection may send, on average over a burst of twice as many.
+    /// Default 100.
+    pub messages_per_second: u32,
+    /// Open streams in all. Default 10,000.
+    pub max_connections: usize,
+    /// Open streams from one IP address. Default 2,000.
+    pub max_connections_per_ip: usize,
+    /// Unacknowledged messages a client that acknowledges may have outstanding before
+    /// further changes wait (and coalesce) for its next ack. Default 8.
+    pub window: u64,
+    /// Longest one message may take to go out before the client counts as gone. Default
+    /// 30 s.
+    pub send_timeout: Duration,
+}
+
+impl Default for StreamLimits {
+    fn default() -> Self {
+        Self {
+            max_message_bytes: 64 << 10,
+            messages_per_second: 100,
+            max_connections: 10_000,
+            max_connections_per_ip: 2_000,
+            window: 8,
+            send_timeout: Duration::from_secs(30),
+        }
+    }
 }
 
 impl Default for Config {
@@ -68,6 +108,7 @@ impl Default for Config {
             debounce_max: Duration::from_secs(2),
             aggregates: AggregateOptions::default(),
             rebuild: true,
+            stream: StreamLimits::default(),
         }
     }
 }
@@ -83,18 +124,68 @@ struct Inner {
     world: Arc<World>,
     config: Config,
     metrics: PrometheusHandle,
+    /// Every model's asset, for cuts.
+    models: cut::ModelTable,
+    /// Counts commits and publishes: streams wait on it.
+    changes: tokio::sync::watch::Sender<u64>,
+    /// Open streams, in all and by address.
+    streams: stream::Connections,
 }
 
 impl AppState {
     /// The state of a service over `world`.
     pub fn new(world: Arc<World>, config: Config) -> Self {
+        let models = cut::ModelTable::default();
+        if let Err(e) = models.refresh(&world) {
+            tracing::warn!(error = %e, "the model table is read on the first cut instead");
+        }
+        let (changes, _) = tokio::sync::watch::channel(0);
+        {
+            let changes = changes.clone();
+            world.on_change(move || changes.send_modify(|n| *n += 1));
+        }
         Self {
             inner: Arc::new(Inner {
                 world,
                 config,
                 metrics: prometheus(),
+                models,
+                changes,
+                streams: stream::Connections::default(),
             }),
         }
+    }
+
+    /// Plans the cut for `view` on the world as it is now (see `cut.rs`), reading new
+    /// models first if the plan met one.
+    pub fn plan(
+        &self,
+        view: &horizon_protocol::View,
+    ) -> Result<cut::Plan, horizon_world::WorldError> {
+        let world = &self.inner.world;
+        let models = &self.inner.models;
+        let plan = world.with_served(|served| cut::plan(served, models, view))?;
+        if plan.missing_models == 0 {
+            return Ok(plan);
+        }
+        models.refresh(world)?;
+        world.with_served(|served| cut::plan(served, models, view))
+    }
+
+    /// One cut at `view`, off the async runtime.
+    pub async fn cut(
+        &self,
+        view: horizon_protocol::View,
+    ) -> AppResult<horizon_protocol::CutResponse> {
+        let state = self.clone();
+        let plan = tokio::task::spawn_blocking(move || state.plan(&view)).await??;
+        Ok(horizon_protocol::CutResponse {
+            generation: plan.generation,
+            published: plan.published,
+            objects: plan.objects,
+            entries: plan.entries(),
+            stopped_by: plan.stopped_by,
+        })
     }
 
     /// The world.
@@ -105,6 +196,16 @@ impl AppState {
     /// The configuration.
     pub fn config(&self) -> &Config {
         &self.inner.config
+    }
+
+    /// Open streams.
+    fn streams(&self) -> &stream::Connections {
+        &self.inner.streams
+    }
+
+    /// A receiver that sees every commit and publish from now on.
+    fn changes(&self) -> tokio::sync::watch::Receiver<u64> {
+        self.inner.changes.subscribe()
     }
 
     /// Runs blocking work (the database, ingest, the tree) off the async runtime.
@@ -256,7 +357,8 @@ pub async fn run(
         .config()
         .rebuild
         .then(|| Rebuilder::spawn(state.world().clone(), state.config().clone()));
-    let served = axum::serve(listener, app(state))
+    let app = app(state).into_make_service_with_connect_info::<std::net::SocketAddr>();
+    let served = axum::serve(listener, app)
         .with_graceful_shutdown(shutdown)
         .await;
     if let Some(r) = rebuilder {

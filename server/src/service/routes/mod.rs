@@ -2,6 +2,7 @@
 //! the contract's errors.
 
 pub mod assets;
+pub mod cut;
 pub mod meta;
 pub mod models;
 pub mod objects;
@@ -15,7 +16,7 @@ use serde::de::DeserializeOwned;
 use utoipa_axum::router::OpenApiRouter;
 use utoipa_axum::routes;
 
-use super::{AppError, AppState};
+use super::{stream, AppError, AppState};
 
 /// Every route of the API, with its OpenAPI description.
 pub fn router() -> OpenApiRouter<AppState> {
@@ -30,6 +31,8 @@ pub fn router() -> OpenApiRouter<AppState> {
         .routes(routes!(objects::create, objects::list))
         .routes(routes!(objects::get, objects::patch, objects::delete))
         .routes(routes!(objects::batch))
+        .routes(routes!(cut::get))
+        .routes(routes!(stream::stream))
         .routes(routes!(assets::get))
 }
 

@@ -1,0 +1,735 @@
+//! The served cut: a BVH cut (core paper eq. 3 and section 3; `DESIGN.md`, "Cut test") over
+//! the tree at the last committed generation, drawn with the published aggregates, under a
+//! client's budgets (`DESIGN.md`, "Entries and cuts"; "Generations, pending objects,
+//! completeness").
+//!
+//! [`plan`] refines best-first from the root: the node whose worst case (an `r_max` object at
+//! the bound's nearest point) subtends the largest solid angle is replaced by its children (a
+//! leaf by its objects) while that angle is at least `min_solid_angle` and the cut stays
+//! within every budget. It stops before the first refinement that would exceed one, and says
+//! which. Every refinement replaces a node by exactly its children, so every object of the
+//! generation is counted exactly once, by itself or by one ancestor: the cut is complete.
+//!
+//! Two things differ from the plain BVH cut, both because the tree runs ahead of the
+//! published aggregates:
+//! - A node the published manifest has no aggregate for (a node the tree made since) is
+//!   refined at once, whatever its size and the budgets: there is nothing to draw it with.
+//! - An object placed or moved after the published generation is pending. Wherever it
+//!   subtends at least `min_solid_angle` it is its own entry (`pending: true`), and the
+//!   aggregate that would hold it covers one object fewer; an aggregate left covering nothing
+//!   is not sent. That aggregate may still draw a moved object at its old place or a deleted
+//!   one until the next publish: a bounded lag in what is drawn, never in what is counted.
+//!
+//! Budgets count a shared asset once (bytes and draw calls) and triangles per entry, as a
+//! client drawing each asset's placements in one instanced batch spends them.
+//!
+//! [`Plan::diff`] turns two plans into a stream's delta: removals with their reasons, and
+//! additions naming the entries they replace (load before drop).
+
+use std::cmp::Ordering;
+use std::collections::{BinaryHeap, HashMap, HashSet};
+use std::sync::{Arc, RwLock};
+
+use glam::{Affine3A, Vec3};
+use horizon_aggregate::AggregateManifest;
+use horizon_bvh::{solid_angle, worst_case_solid_angle, NodeId, ObjectId};
+use horizon_protocol::{
+    Addition, Asset, AssetRole, Budgets, Entry, EntryKind, Placement, Removal, RemoveReason,
+    StoppedBy, View, DEFAULT_MAX_ENTRIES,
+};
+use horizon_world::{Served, World, WorldError};
+
+/// Plans the cut for `view` over what `served` holds at `generation`: see the module docs.
+pub fn plan(served: &Served<'_>, models: &ModelTable, view: &View) -> Plan {
+    let mut planner = Planner::new(served, models, view);
+    planner.seed();
+    let stopped_by = planner.refine();
+    planner.finish(stopped_by)
+}
+
+/// A planned cut: what [`plan`] chose, with just enough to compare two plans; the wire
+/// entries are made from it by [`Plan::entries`] or [`Plan::entry`].
+#[derive(Clone, Debug, Default)]
+pub struct Plan {
+    /// The generation of the tree it was planned on.
+    pub generation: u64,
+    /// The published generation whose aggregates it names.
+    pub published: u64,
+    /// Objects at `generation`.
+    pub objects: u64,
+    /// The entries, largest solid angle first.
+    pub items: Vec<Planned>,
+    /// The budget that stopped refinement.
+    pub stopped_by: Option<StoppedBy>,
+    /// Objects left out because their model is not in the [`ModelTable`] yet (refresh it
+    /// and plan again).
+    pub missing_models: usize,
+}
+
+/// One planned entry.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Planned {
+    /// The wire id.
+    pub id: String,
+    /// What it draws.
+    pub what: Drawn,
+    /// Objects it counts.
+    pub covers: u64,
+    /// A pending object.
+    pub pending: bool,
+    /// Its sphere.
+    pub center: [f32; 3],
+    /// And radius.
+    pub radius: f32,
+    /// Solid angle from the eye: exact for an object, the worst case for an aggregate.
+    pub solid_angle: f32,
+}
+
+/// What a planned entry draws.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Drawn {
+    /// A world object: its world id, model and placement.
+    Object {
+        /// World id.
+        object: u64,
+        /// The tree's id of it.
+        tree_id: ObjectId,
+        /// The model's asset.
+        model: Arc<ModelAsset>,
+        /// Model to world.
+        transform: Affine3A,
+    },
+    /// A node's published aggregate.
+    Aggregate {
+        /// The node.
+        node: NodeId,
+        /// Its GLB's hash.
+        glb: String,
+        /// GLB bytes.
+        bytes: u64,
+        /// Expanded triangles.
+        triangles: u64,
+        /// Primitives.
+        draw_calls: u64,
+    },
+}
+
+/// What the cut needs of a model: its stored GLB and what drawing it costs.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct ModelAsset {
+    /// The stored GLB's hash.
+    pub hash: String,
+    /// Its bytes.
+    pub bytes: u64,
+    /// Triangles drawn (instances expanded).
+    pub triangles: u64,
+    /// Draw calls: one per submesh.
+    pub draw_calls: u64,
+}
+
+/// Every model's [`ModelAsset`] by model number, read from the world when a number is new.
+#[derive(Debug, Default)]
+pub struct ModelTable {
+    by_number: RwLock<Vec<Option<Arc<ModelAsset>>>>,
+}
+
+impl ModelTable {
+    /// Makes sure every model number up to those `world` holds is known.
+    pub fn refresh(&self, world: &World) -> Result<(), WorldError> {
+        let rows = world.all_models()?;
+        let mut table = self
+            .by_number
+            .write()
+            .map_err(|_| WorldError::Inconsistent("model table lock poisoned".into()))?;
+        for row in rows {
+            let count = |key: &str| row.stats.get(key).and_then(|v| v.as_u64()).unwrap_or(0);
+            let i = row.number as usize;
+            if table.len() <= i {
+                table.resize(i + 1, None);
+            }
+            table[i] = Some(Arc::new(ModelAsset {
+                hash: row.asset,
+                bytes: row.bytes,
+                triangles: count("triangles_expanded"),
+                draw_calls: count("submeshes").max(1),
+            }));
+        }
+        Ok(())
+    }
+
+    fn get(&self, number: u64) -> Option<Arc<ModelAsset>> {
+        self.by_number
+            .read()
+            .ok()
+            .and_then(|t| t.get(number as usize).cloned().flatten())
+    }
+}
+
+/// A unit the planner puts in or takes out of the cut.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+enum Unit {
+    /// A node's aggregate with the pending objects it leaves to entries of their own.
+    Node(NodeId),
+    /// An object as itself.
+    Object(ObjectId),
+}
+
+/// An asset as the budgets count it: once per cut.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+enum AssetKey {
+    Model(u64),
+    Node(NodeId),
+}
+
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+struct Totals {
+    entries: u64,
+    bytes: u64,
+    draw_calls: u64,
+    triangles: u64,
+}
+
+/// A node in the refinement heap, by worst-case solid angle (ties by id, for determinism).
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Candidate {
+    solid_angle: f32,
+    node: NodeId,
+}
+
+impl Eq for Candidate {}
+
+impl Ord for Candidate {
+    fn cmp(&self, other: &Self) -> Ordering {
+        self.solid_angle
+            .total_cmp(&other.solid_angle)
+            .then_with(|| other.node.0.cmp(&self.node.0))
+    }
+}
+
+impl PartialOrd for Candidate {
+    fn partial_cmp(&self, other: &Self) -> Option<Ordering> {
+        Some(self.cmp(other))
+    }
+}
+
+struct Planner<'a> {
+    served: &'a Served<'a>,
+    manifest: Option<&'a AggregateManifest>,
+    models: &'a ModelTable,
+    eye: Vec3,
+    min_solid_angle: f32,
+    budgets: Budgets,
+    /// Pending objects (tree ids) under each node, at any depth.
+    pending_under: HashMap<NodeId, Vec<ObjectId>>,
+    pending: HashSet<ObjectId>,
+    /// What the cut holds.
+    units: HashSet<Unit>,
+    heap: BinaryHeap<Candidate>,
+    assets: HashMap<AssetKey, u32>,
+    totals: Totals,
+}
+
+impl<'a> Planner<'a> {
+    fn new(served: &'a Served<'a>, models: &'a ModelTable, view: &View) -> Self {
+        let tree = served.tree;
+        let mut pending_under: HashMap<NodeId, Vec<ObjectId>> = HashMap::new();
+        let mut pending = HashSet::new();
+        for object in tree.placed_after(served.published) {
+            let Some(id) = tree.tree_id(object) else {
+                continue;
+            };
+            pending.insert(id);
+            let mut at = tree.bvh.object(id).map(|o| o.leaf());
+            while let Some(n) = at {
+                pending_under.entry(n).or_default().push(id);
+                at = tree.bvh.node(n).and_then(|r| r.parent());
+            }
+        }
+        let mut budgets = view.budgets;
+        budgets.max_entries.get_or_insert(DEFAULT_MAX_ENTRIES);
+        Self {
+            served,
+            manifest: served.manifest.as_deref(),
+            models,
+            eye: Vec3::new(view.eye[0] as f32, view.eye[1] as f32, view.eye[2] as f32),
+            min_solid_angle: view.min_solid_angle as f32,
+            budgets,
+            pending_under,
+            pending,
+            units: HashSet::new(),
+            heap: BinaryHeap::new(),
+            assets: HashMap::new(),
+            totals: Totals::default(),
+        }
+    }
+
+    /// The root, expanded at once wherever no aggregate can draw it.
+    fn seed(&mut self) {
+        let bvh = &self.served.tree.bvh;
+        if bvh.is_empty() {
+            return;
+        }
+        let mut added = Vec::new();
+        self.expand(bvh.root(), &mut added);
+        for unit in added {
+            self.put(unit, 1);
+        }
+    }
+
+    /// Best-first refinement; returns the budget that stopped it, if one did.
+    fn refine(&mut self) -> Option<StoppedBy> {
+        if let Some(over) = self.over_budget() {
+            // Even the coarsest cut the published aggregates allow is over: say so.
+            return Some(over);
+        }
+        while let Some(top) = self.heap.pop() {
+            if top.solid_angle < self.min_solid_angle {
+                return None;
+            }
+            let node = top.node;
+            let Some(n) = self.served.tree.bvh.node(node) else {
+                continue;
+            };
+            let mut added = Vec::new();
+            if n.is_leaf() {
+                added.extend(n.objects().map(Unit::Object));
+            } else {
+                for child in n.child_nodes().collect::<Vec<_>>() {
+                    self.expand(child, &mut added);
+                }
+            }
+            self.put(Unit::Node(node), -1);
+            for &unit in &added {
+                self.put(unit, 1);
+            }
+            if let Some(over) = self.over_budget() {
+                for &unit in &added {
+                    self.put(unit, -1);
+                }
+                self.put(Unit::Node(node), 1);
+                return Some(over);
+            }
+        }
+        None
+    }
+
+    /// What stands for `node` in the cut: its aggregate if the manifest has one, else its
+    /// children (a leaf's objects), recursively.
+    fn expand(&self, node: NodeId, out: &mut Vec<Unit>) {
+        let bvh = &self.served.tree.bvh;
+        let Some(n) = bvh.node(node) else {
+            return;
+        };
+        if self.aggregate(node).is_some() {
+            out.push(Unit::Node(node));
+        } else if n.is_leaf() {
+            out.extend(n.objects().map(Unit::Object));
+        } else {
+            for child in n.child_nodes() {
+                self.expand(child, out);
+            }
+        }
+    }
+
+    fn aggregate(&self, node: NodeId) -> Option<&'a horizon_aggregate::AggregateEntry> {
+        self.manifest?.nodes.get(&node.0)
+    }
+
+    /// The pending objects a node's aggregate leaves to entries of their own.
+    fn extracted(&self, node: NodeId) -> impl Iterator<Item = ObjectId> + '_ {
+        let bvh = &self.served.tree.bvh;
+        self.pending_under
+            .get(&node)
+            .into_iter()
+            .flatten()
+            .copied()
+            .filter(move |&o| {
+                bvh.object(o).is_some_and(|o| {
+                    let s = o.sphere();
+                    solid_angle(s.radius, (s.centre - self.eye).length()) >= self.min_solid_angle
+                })
+            })
+    }
+
+    /// Adds (`sign` 1) or takes out (-1) a unit and what it costs.
+    fn put(&mut self, unit: Unit, sign: i64) {
+        if sign > 0 {
+            self.units.insert(unit);
+        } else {
+            self.units.remove(&unit);
+        }
+        match unit {
+            Unit::Object(o) => self.charge_object(o, sign),
+            Unit::Node(node) => {
+                let extracted: Vec<ObjectId> = self.extracted(node).collect();
+                for &o in &extracted {
+                    self.charge_object(o, sign);
+                }
+                let count = self
+                    .served
+                    .tree
+                    .bvh
+                    .node(node)
+                    .map_or(0, |n| u64::from(n.count()));
+                if count > extracted.len() as u64 {
+                    if let Some(entry) = self.aggregate(node) {
+                        let stats = &entry.stats;
+                        self.charge(
+                            AssetKey::Node(node),
+                            stats.bytes as u64,
+                            stats.submeshes.max(1) as u64,
+                            stats.triangles_out,
+                            sign,
+                        );
+                    }
+                }
+                if sign > 0 {
+                    if let Some(angle) = self.worst_case(node) {
+                        if angle >= self.min_solid_angle {
+                            self.heap.push(Candidate {
+                                solid_angle: angle,
+                                node,
+                            });
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    fn charge_object(&mut self, o: ObjectId, sign: i64) {
+        let Some(model) = self.served.tree.bvh.object(o).map(|o| o.model()) else {
+            return;
+        };
+        let (bytes, draw_calls, triangles) = self
+            .models
+            .get(model)
+            .map_or((0, 1, 0), |m| (m.bytes, m.draw_calls, m.triangles));
+        self.charge(AssetKey::Model(model), bytes, draw_calls, triangles, sign);
+    }
+
+    fn charge(&mut self, key: AssetKey, bytes: u64, draw_calls: u64, triangles: u64, sign: i64) {
+        let t = &mut self.totals;
+        if sign > 0 {
+            t.entries += 1;
+            t.triangles += triangles;
+            let count = self.assets.entry(key).or_insert(0);
+            if *count == 0 {
+                t.bytes += bytes;
+                t.draw_calls += draw_calls;
+            }
+            *count += 1;
+        } else {
+            t.entries = t.entries.saturating_sub(1);
+            t.triangles = t.triangles.saturating_sub(triangles);
+            if let Some(count) = self.assets.get_mut(&key) {
+                *count = count.saturating_sub(1);
+                if *count == 0 {
+                    self.assets.remove(&key);
+                    t.bytes = t.bytes.saturating_sub(bytes);
+                    t.draw_calls = t.draw_calls.saturating_sub(draw_calls);
+                }
+            }
+        }
+    }
+
+    fn over_budget(&self) -> Option<StoppedBy> {
+        let t = &self.totals;
+        let b = &self.budgets;
+        let over = |limit: Option<u64>, value: u64| limit.is_some_and(|l| value > l);
+        if over(b.max_entries, t.entries) {
+            Some(StoppedBy::MaxEntries)
+        } else if over(b.max_bytes, t.bytes) {
+            Some(StoppedBy::MaxBytes)
+        } else if over(b.max_draw_calls, t.draw_calls) {
+            Some(StoppedBy::MaxDrawCalls)
+        } else if over(b.max_triangles, t.triangles) {
+            Some(StoppedBy::MaxTriangles)
+        } else {
+            None
+        }
+    }
+
+    fn worst_case(&self, node: NodeId) -> Option<f32> {
+        let n = self.served.tree.bvh.node(node)?;
+        let bound = n.bound();
+        Some(worst_case_solid_angle(
+            self.eye,
+            bound.centre,
+            bound.radius,
+            n.r_max(),
+        ))
+    }
+
+    fn finish(self, stopped_by: Option<StoppedBy>) -> Plan {
+        let tree = self.served.tree;
+        let published = self.served.published;
+        let mut items = Vec::with_capacity(self.units.len());
+        let missing = std::cell::Cell::new(0);
+        let object_item = |o: ObjectId, pending: bool| -> Option<Planned> {
+            let r = tree.bvh.object(o)?;
+            let object = tree.world_id(o)?;
+            let sphere = r.sphere();
+            let Some(model) = self.models.get(r.model()) else {
+                missing.set(missing.get() + 1);
+                return None;
+            };
+            Some(Planned {
+                id: format!("o:{object}@{}", tree.placed(object)),
+                what: Drawn::Object {
+                    object,
+                    tree_id: o,
+                    model,
+                    transform: r.transform(),
+                },
+                covers: 1,
+                pending,
+                center: sphere.centre.to_array(),
+                radius: sphere.radius,
+                solid_angle: solid_angle(sphere.radius, (sphere.centre - self.eye).length()),
+            })
+        };
+        for &unit in &self.units {
+            match unit {
+                Unit::Object(o) => {
+                    items.extend(object_item(o, self.pending.contains(&o)));
+                }
+                Unit::Node(node) => {
+                    let extracted: Vec<ObjectId> = self.extracted(node).collect();
+                    items.extend(extracted.iter().filter_map(|&o| object_item(o, true)));
+                    let (Some(n), Some(entry)) = (tree.bvh.node(node), self.aggregate(node)) else {
+                        continue;
+                    };
+                    let covers = u64::from(n.count()).saturating_sub(extracted.len() as u64);
+                    if covers == 0 {
+                        continue;
+                    }
+                    let sphere = n.outer_sphere();
+                    let stats = &entry.stats;
+                    items.push(Planned {
+                        id: format!("n:{}@{}", node.0, entry.glb),
+                        what: Drawn::Aggregate {
+                            node,
+                            glb: entry.glb.clone(),
+                            bytes: stats.bytes as u64,
+                            triangles: stats.triangles_out,
+                            draw_calls: stats.submeshes.max(1) as u64,
+                        },
+                        covers,
+                        pending: false,
+                        center: sphere.centre.to_array(),
+                        radius: sphere.radius,
+                        solid_angle: self.worst_case(node).unwrap_or(0.0),
+                    });
+                }
+            }
+        }
+        items.sort_by(|a, b| {
+            b.solid_angle
+                .total_cmp(&a.solid_angle)
+                .then_with(|| a.id.cmp(&b.id))
+        });
+        Plan {
+            generation: tree.generation,
+            published,
+            objects: tree.bvh.len() as u64,
+            items,
+            stopped_by,
+            missing_models: missing.get(),
+        }
+    }
+}
+
+impl Planned {
+    /// The wire entry.
+    pub fn entry(&self) -> Entry {
+        let (kind, asset, bytes, triangles, draw_calls, matrix, role) = match &self.what {
+            Drawn::Object {
+                model, transform, ..
+            } => (
+                EntryKind::Object,
+                model.hash.clone(),
+                model.bytes,
+                model.triangles,
+                model.draw_calls,
+                matrix_of(transform),
+                AssetRole::Model,
+            ),
+            Drawn::Aggregate {
+                glb,
+                bytes,
+                triangles,
+                draw_calls,
+                ..
+            } => (
+                EntryKind::Aggregate,
+                glb.clone(),
+                *bytes,
+                *triangles,
+                *draw_calls,
+                matrix_of(&Affine3A::IDENTITY),
+                AssetRole::Mesh,
+            ),
+        };
+        Entry {
+            id: self.id.clone(),
+            kind,
+            assets: vec![Asset {
+                hash: asset.clone(),
+                bytes,
+                role,
+            }],
+            placements: vec![Placement { asset, matrix }],
+            level: 0,
+            pending: self.pending,
+            bytes,
+            triangles,
+            draw_calls,
+            center: self.center,
+            radius: self.radius,
+            covers: self.covers,
+        }
+    }
+
+    /// The same entry, as a client holding it would compare it.
+    fn same(&self, other: &Planned) -> bool {
+        self.covers == other.covers
+            && self.pending == other.pending
+            && self.center == other.center
+            && self.radius == other.radius
+    }
+
+    fn node(&self) -> Option<NodeId> {
+        match self.what {
+            Drawn::Aggregate { node, .. } => Some(node),
+            Drawn::Object { .. } => None,
+        }
+    }
+
+    fn object(&self) -> Option<u64> {
+        match self.what {
+            Drawn::Object { object, .. } => Some(object),
+            Drawn::Aggregate { .. } => None,
+        }
+    }
+}
+
+/// A 3x4 column-major matrix: the three axes, then the translation.
+fn matrix_of(t: &Affine3A) -> [f32; 12] {
+    let m = t.matrix3;
+    let c = t.translation;
+    [
+        m.x_axis.x, m.x_axis.y, m.x_axis.z, m.y_axis.x, m.y_axis.y, m.y_axis.z, m.z_axis.x,
+        m.z_axis.y, m.z_axis.z, c.x, c.y, c.z,
+    ]
+}
+
+impl Plan {
+    /// The wire entries.
+    pub fn entries(&self) -> Vec<Entry> {
+        self.items.iter().map(Planned::entry).collect()
+    }
+
+    /// The delta from `before` (what a client holds) to this plan: entries to remove, with
+    /// why, then entries to add, each naming the removed entries whose objects it now
+    /// draws. `served` is the tree this plan was made on; ancestry is read from it.
+    pub fn diff(&self, before: &Plan, served: &Served<'_>) -> (Vec<Addition>, Vec<Removal>) {
+        let now: HashMap<&str, &Planned> = self.items.iter().map(|p| (p.id.as_str(), p)).collect();
+        let old: HashMap<&str, &Planned> =
+            before.items.iter().map(|p| (p.id.as_str(), p)).collect();
+        let gone: Vec<&Planned> = before
+            .items
+            .iter()
+            .filter(|p| now.get(p.id.as_str()).is_none_or(|n| !n.same(p)))
+            .collect();
+        let fresh: Vec<&Planned> = self
+            .items
+            .iter()
+            .filter(|p| old.get(p.id.as_str()).is_none_or(|o| !o.same(p)))
+            .collect();
+        if gone.is_empty() && fresh.is_empty() {
+            return (Vec::new(), Vec::new());
+        }
+        let tree = served.tree;
+        let bvh = &tree.bvh;
+        // Where each removed entry sat in the tree now: its node, or its object's leaf.
+        let place_of = |p: &Planned| -> Option<NodeId> {
+            match p.what {
+                Drawn::Aggregate { node, .. } => Some(node),
+                Drawn::Object { object, .. } => tree
+                    .tree_id(object)
+                    .and_then(|o| bvh.object(o))
+                    .map(|o| o.leaf()),
+            }
+        };
+        let ancestors = |start: Option<NodeId>| {
+            std::iter::successors(start, move |&n| bvh.node(n).and_then(|r| r.parent()))
+        };
+        let fresh_nodes: HashMap<NodeId, usize> = fresh
+            .iter()
+            .enumerate()
+            .filter_map(|(i, p)| p.node().map(|n| (n, i)))
+            .collect();
+        let fresh_objects: HashMap<u64, usize> = fresh
+            .iter()
+            .enumerate()
+            .filter_map(|(i, p)| p.object().map(|o| (o, i)))
+            .collect();
+        let gone_nodes: HashMap<NodeId, usize> = gone
+            .iter()
+            .enumerate()
+            .filter_map(|(i, p)| p.node().map(|n| (n, i)))
+            .collect();
+        let mut replaces: Vec<Vec<String>> = vec![Vec::new(); fresh.len()];
+        let mut removals = Vec::with_capacity(gone.len());
+        for p in &gone {
+            let reason = if let Some(&i) = p
+                .node()
+                .and_then(|n| fresh_nodes.get(&n))
+                .or_else(|| p.object().and_then(|o| fresh_objects.get(&o)))
+            {
+                // The same node or object, in a new version.
+                replaces[i].push(p.id.clone());
+                RemoveReason::Replaced
+            } else if p.object().is_some_and(|o| tree.tree_id(o).is_none()) {
+                RemoveReason::Deleted
+            } else if let Some(&i) = ancestors(place_of(p))
+                .skip(usize::from(p.node().is_some()))
+                .find_map(|a| fresh_nodes.get(&a))
+            {
+                // An ancestor came in: the viewer went away.
+                replaces[i].push(p.id.clone());
+                RemoveReason::Coarsened
+            } else {
+                // Finer entries came in (found below, from their side), or the tree moved.
+                RemoveReason::Refined
+            };
+            removals.push(Removal {
+                id: p.id.clone(),
+                reason,
+            });
+        }
+        for (i, p) in fresh.iter().enumerate() {
+            let start = match p.what {
+                Drawn::Aggregate { node, .. } => bvh.node(node).and_then(|r| r.parent()),
+                Drawn::Object { .. } => place_of(p),
+            };
+            for a in ancestors(start) {
+                if let Some(&g) = gone_nodes.get(&a) {
+                    if removals[g].reason == RemoveReason::Refined {
+                        replaces[i].push(gone[g].id.clone());
+                    }
+                }
+            }
+        }
+        let additions = fresh
+            .iter()
+            .zip(replaces)
+            .map(|(p, replaces)| Addition {
+                entry: p.entry(),
+                replaces,
+            })
+            .collect();
+        (additions, removals)
+    }
+}
