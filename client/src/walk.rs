@@ -1,0 +1,580 @@
+//! [`walk`]: a viewer moving along a path at a steady speed, as a client would: it sends its
+//! view over the stream ten times a second, applies and acks every message (checking that
+//! the kept cut counts every object exactly once after each), and fetches the assets its cut
+//! needs through the [`AssetCache`], a few at a time and, if asked, within a bandwidth. It
+//! reports what that cost and what a viewer would have seen: how long each view took until
+//! every asset of the cut that answered it was loaded, and the share of frames in which an
+//! entry of the cut had an asset still missing.
+
+use std::collections::{BTreeMap, HashSet, VecDeque};
+use std::time::{Duration, Instant};
+
+use futures_util::stream::FuturesUnordered;
+use futures_util::StreamExt;
+use horizon_protocol::{ErrorCode, ServerMessage, View};
+use serde::Serialize;
+
+use crate::assets::{AssetCache, AssetError, Fetched, TokenBucket};
+use crate::http::{code_name, ClientError};
+use crate::local::{ApplyError, Incomplete, LocalCut};
+use crate::stream::{Stream, StreamError};
+
+/// Walks `options.path` against the server at `base_url`: see the module docs.
+///
+/// # Errors
+/// [`WalkError`]: a bad path or view, a stream that fails or closes, a message that does not
+/// apply or leaves the cut incomplete, an error message from the server, or an asset that
+/// cannot be fetched (other than one the server no longer has, which is counted).
+pub async fn walk(
+    base_url: &str,
+    options: &WalkOptions,
+    cache: &AssetCache,
+) -> Result<WalkReport, WalkError> {
+    let path = Polyline::new(&options.path)?;
+    if !(options.speed.is_finite() && options.speed >= 0.0) {
+        return Err(WalkError::BadOptions(format!(
+            "speed {} is not a finite number of at least 0",
+            options.speed
+        )));
+    }
+    let mut template = options.view;
+    template.eye = path.at(0.0);
+    template.check().map_err(WalkError::BadView)?;
+    let interval = options.interval.max(Duration::from_millis(1));
+    let bucket = match options.bandwidth {
+        Some(b) if b.is_finite() && b > 0.0 => Some(TokenBucket::new(b, (b * 0.1).max(16_384.0))),
+        Some(b) => {
+            return Err(WalkError::BadOptions(format!(
+                "bandwidth {b} is not a positive number of bytes per second"
+            )))
+        }
+        None => None,
+    };
+
+    let mut stream = Stream::connect(base_url).await?;
+    let mut walker = Walker::new(Instant::now(), options.concurrency.max(1));
+    let deadline = tokio::time::Instant::from_std(walker.start + options.duration);
+    let mut ticker = tokio::time::interval(interval);
+    ticker.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
+    let mut fetches = FuturesUnordered::new();
+    let mut next_view = 1u64;
+
+    loop {
+        tokio::select! {
+            () = tokio::time::sleep_until(deadline) => break,
+            _ = ticker.tick() => {
+                walker.frame();
+                let elapsed = walker.start.elapsed().as_secs_f64();
+                let mut view = template;
+                view.eye = path.walked(options.speed * elapsed);
+                stream.send_view(next_view, &view).await?;
+                walker.sent.insert(next_view, Instant::now());
+                walker.report.views_sent += 1;
+                walker.report.distance = options.speed * elapsed;
+                next_view += 1;
+            }
+            message = stream.next() => {
+                let message = message?;
+                walker.message(&message)?;
+                if let Some(seq) = message.seq() {
+                    stream.ack(seq).await?;
+                }
+            }
+            Some((hash, result)) = fetches.next(), if !fetches.is_empty() => {
+                walker.fetched(hash, result)?;
+            }
+        }
+        while fetches.len() < walker.concurrency {
+            let Some(hash) = walker.next_fetch() else {
+                break;
+            };
+            fetches.push(fetch(cache, bucket.as_ref(), hash));
+        }
+    }
+    let _ = stream.close().await;
+    Ok(walker.finish())
+}
+
+/// What a walk does: where, how fast, for how long, with which view.
+#[derive(Clone, Debug)]
+pub struct WalkOptions {
+    /// The waypoints, world space; the walker goes from the first to the last and back.
+    pub path: Vec<[f64; 3]>,
+    /// Metres per second along the path.
+    pub speed: f64,
+    /// Bytes per second the asset downloads may use together (None: no limit).
+    pub bandwidth: Option<f64>,
+    /// How long the walk lasts.
+    pub duration: Duration,
+    /// The view sent at every step, its `eye` replaced by the walker's position.
+    pub view: View,
+    /// Asset downloads at once.
+    pub concurrency: usize,
+    /// Time between views, which is also a frame. Default 100 ms.
+    pub interval: Duration,
+}
+
+impl WalkOptions {
+    /// A walk along `path` at 1.5 m/s for 30 s with the default view, no bandwidth limit,
+    /// 4 downloads at once and a view every 100 ms.
+    pub fn new(path: Vec<[f64; 3]>) -> Self {
+        Self {
+            path,
+            speed: 1.5,
+            bandwidth: None,
+            duration: Duration::from_secs(30),
+            view: View::at([0.0, 0.0, 0.0]),
+            concurrency: 4,
+            interval: Duration::from_millis(100),
+        }
+    }
+}
+
+/// What a walk cost and what its viewer saw.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct WalkReport {
+    /// Seconds walked.
+    pub seconds: f64,
+    /// Metres walked.
+    pub distance: f64,
+    /// Views sent.
+    pub views_sent: u64,
+    /// Resets received.
+    pub resets: u64,
+    /// Deltas received.
+    pub deltas: u64,
+    /// Entries that arrived in resets.
+    pub reset_entries: u64,
+    /// Entries added by deltas.
+    pub entries_added: u64,
+    /// Entries removed by deltas.
+    pub entries_removed: u64,
+    /// Assets downloaded.
+    pub assets_fetched: u64,
+    /// Assets already in the cache (a 304).
+    pub assets_cached: u64,
+    /// Assets the server no longer had (404) when asked.
+    pub assets_gone: u64,
+    /// Body bytes downloaded.
+    pub bytes_fetched: u64,
+    /// Views whose cut was loaded whole before the walk ended.
+    pub views_loaded: u64,
+    /// Views sent whose cut was not loaded whole when the walk ended.
+    pub views_unloaded: u64,
+    /// From sending a view until every asset of the cut that answered it (or a later one)
+    /// was loaded.
+    pub view_latency_ms: Latencies,
+    /// From the start until the first cut was loaded whole.
+    pub first_complete_ms: Option<f64>,
+    /// Frames since the first cut arrived.
+    pub frames: u64,
+    /// Frames in which an entry of the cut had an asset still missing.
+    pub incomplete_frames: u64,
+    /// `incomplete_frames / frames` (0 without frames).
+    pub incomplete_share: f64,
+    /// Entries of the cut at the end.
+    pub final_entries: usize,
+    /// The cut's generation at the end.
+    pub final_generation: u64,
+}
+
+/// Percentiles of a set of durations, milliseconds (0 for an empty set).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct Latencies {
+    /// How many.
+    pub count: usize,
+    /// The median.
+    pub p50: f64,
+    /// The 99th percentile.
+    pub p99: f64,
+    /// The largest.
+    pub max: f64,
+}
+
+impl Latencies {
+    /// The percentiles of `samples` (nearest rank).
+    pub fn of(samples: &[Duration]) -> Self {
+        let mut ms: Vec<f64> = samples.iter().map(|d| d.as_secs_f64() * 1e3).collect();
+        ms.sort_by(f64::total_cmp);
+        let rank = |q: f64| -> f64 {
+            if ms.is_empty() {
+                return 0.0;
+            }
+            let i = ((q * ms.len() as f64).ceil() as usize).clamp(1, ms.len()) - 1;
+            ms[i]
+        };
+        Self {
+            count: ms.len(),
+            p50: rank(0.5),
+            p99: rank(0.99),
+            max: ms.last().copied().unwrap_or(0.0),
+        }
+    }
+}
+
+/// A path through waypoints, walked at a distance from its start.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Polyline {
+    points: Vec<[f64; 3]>,
+    /// Distance from the start to each point.
+    along: Vec<f64>,
+}
+
+impl Polyline {
+    /// The path through `points` (at least one, every coordinate finite).
+    ///
+    /// # Errors
+    /// [`WalkError::BadPath`].
+    pub fn new(points: &[[f64; 3]]) -> Result<Self, WalkError> {
+        if points.is_empty() {
+            return Err(WalkError::BadPath("the path has no waypoint".into()));
+        }
+        if let Some(i) = points.iter().position(|p| p.iter().any(|v| !v.is_finite())) {
+            return Err(WalkError::BadPath(format!(
+                "waypoint {i} is not finite: {:?}",
+                points[i]
+            )));
+        }
+        let mut along = Vec::with_capacity(points.len());
+        let mut total = 0.0;
+        along.push(0.0);
+        for pair in points.windows(2) {
+            total += distance(pair[0], pair[1]);
+            along.push(total);
+        }
+        Ok(Self {
+            points: points.to_vec(),
+            along,
+        })
+    }
+
+    /// The path's length.
+    pub fn length(&self) -> f64 {
+        self.along.last().copied().unwrap_or(0.0)
+    }
+
+    /// The point `d` along the path, clamped to its ends.
+    pub fn at(&self, d: f64) -> [f64; 3] {
+        let d = d.clamp(0.0, self.length());
+        // The first segment whose end is at least `d`.
+        let i = self.along.partition_point(|&a| a < d).max(1);
+        let Some(&end) = self.points.get(i) else {
+            return self.points[self.points.len() - 1];
+        };
+        let start = self.points[i - 1];
+        let span = self.along[i] - self.along[i - 1];
+        let t = if span > 0.0 {
+            (d - self.along[i - 1]) / span
+        } else {
+            0.0
+        };
+        [0, 1, 2].map(|k| start[k] + (end[k] - start[k]) * t)
+    }
+
+    /// The point after walking `d` from the start, turning back at each end.
+    pub fn walked(&self, d: f64) -> [f64; 3] {
+        let length = self.length();
+        if length <= 0.0 || !d.is_finite() {
+            return self.at(0.0);
+        }
+        let m = d.max(0.0) % (2.0 * length);
+        self.at(if m <= length { m } else { 2.0 * length - m })
+    }
+}
+
+fn distance(a: [f64; 3], b: [f64; 3]) -> f64 {
+    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+}
+
+/// Why a walk stopped.
+#[derive(Debug, thiserror::Error)]
+pub enum WalkError {
+    /// The waypoints are not a path.
+    #[error("bad path: {0}")]
+    BadPath(String),
+    /// The view template is not a view the server takes.
+    #[error("bad view: {0}")]
+    BadView(String),
+    /// Speed or bandwidth out of range.
+    #[error("{0}")]
+    BadOptions(String),
+    /// The stream failed or was closed.
+    #[error(transparent)]
+    Stream(#[from] StreamError),
+    /// A message did not apply.
+    #[error("message seq {seq} does not apply: {error}")]
+    Apply {
+        /// The message's seq.
+        seq: u64,
+        /// Why.
+        error: ApplyError,
+    },
+    /// After a message, the cut did not count every object exactly once.
+    #[error("after message seq {seq} the cut is incomplete: {error}")]
+    Incomplete {
+        /// The message's seq.
+        seq: u64,
+        /// How.
+        error: Incomplete,
+    },
+    /// The server answered a view with an error message.
+    #[error("the server refused a view: {code}: {message}")]
+    Refused {
+        /// The error code.
+        code: String,
+        /// The message.
+        message: String,
+    },
+    /// An asset could not be fetched.
+    #[error("asset {hash}: {error}")]
+    Asset {
+        /// The asset.
+        hash: String,
+        /// Why.
+        error: AssetError,
+    },
+}
+
+/// One asset download: the hash, and what came of it.
+async fn fetch(
+    cache: &AssetCache,
+    bucket: Option<&TokenBucket>,
+    hash: String,
+) -> (String, Result<Fetched, AssetError>) {
+    let result = cache.get_throttled(&hash, bucket).await;
+    (hash, result)
+}
+
+/// A walk's state between events: the kept cut, the assets, the views awaiting their cut.
+struct Walker {
+    start: Instant,
+    concurrency: usize,
+    cut: LocalCut,
+    /// Assets loaded.
+    loaded: HashSet<String>,
+    /// Assets being downloaded.
+    inflight: HashSet<String>,
+    /// Assets to download, in the order their entries arrived.
+    queue: VecDeque<String>,
+    queued: HashSet<String>,
+    /// Every asset the cut needs.
+    needed: HashSet<String>,
+    /// How many of them are not loaded.
+    missing: usize,
+    /// Views sent and not yet loaded: id -> when sent.
+    sent: BTreeMap<u64, Instant>,
+    latencies: Vec<Duration>,
+    report: WalkReport,
+}
+
+impl Walker {
+    fn new(start: Instant, concurrency: usize) -> Self {
+        Self {
+            start,
+            concurrency,
+            cut: LocalCut::new(),
+            loaded: HashSet::new(),
+            inflight: HashSet::new(),
+            queue: VecDeque::new(),
+            queued: HashSet::new(),
+            needed: HashSet::new(),
+            missing: 0,
+            sent: BTreeMap::new(),
+            latencies: Vec::new(),
+            report: WalkReport::default(),
+        }
+    }
+
+    /// One frame: complete or not, once a cut has arrived.
+    fn frame(&mut self) {
+        if self.cut.started() {
+            self.report.frames += 1;
+            if self.missing > 0 {
+                self.report.incomplete_frames += 1;
+            }
+        }
+    }
+
+    /// Applies a server message, checks the cut, and queues the assets it brought.
+    fn message(&mut self, message: &ServerMessage) -> Result<(), WalkError> {
+        let seq = message.seq().unwrap_or(0);
+        let arrived: Vec<&horizon_protocol::Entry> = match message {
+            ServerMessage::Error { error } => {
+                return Err(WalkError::Refused {
+                    code: code_name(error.code),
+                    message: error.message.clone(),
+                })
+            }
+            ServerMessage::Reset { entries, .. } => {
+                self.report.resets += 1;
+                self.report.reset_entries += entries.len() as u64;
+                entries.iter().collect()
+            }
+            ServerMessage::Delta { add, remove, .. } => {
+                self.report.deltas += 1;
+                self.report.entries_added += add.len() as u64;
+                self.report.entries_removed += remove.len() as u64;
+                add.iter().map(|a| &a.entry).collect()
+            }
+        };
+        self.cut
+            .apply(message)
+            .map_err(|error| WalkError::Apply { seq, error })?;
+        self.cut
+            .check_complete()
+            .map_err(|error| WalkError::Incomplete { seq, error })?;
+        for entry in arrived {
+            for asset in &entry.assets {
+                let h = &asset.hash;
+                if !self.loaded.contains(h)
+                    && !self.inflight.contains(h)
+                    && self.queued.insert(h.clone())
+                {
+                    self.queue.push_back(h.clone());
+                }
+            }
+        }
+        self.needed = self
+            .cut
+            .asset_hashes()
+            .into_iter()
+            .map(str::to_owned)
+            .collect();
+        self.missing = self
+            .needed
+            .iter()
+            .filter(|h| !self.loaded.contains(*h))
+            .count();
+        self.settle();
+        Ok(())
+    }
+
+    /// Records a finished download.
+    fn fetched(
+        &mut self,
+        hash: String,
+        result: Result<Fetched, AssetError>,
+    ) -> Result<(), WalkError> {
+        self.inflight.remove(&hash);
+        match result {
+            Ok(f) => {
+                if f.fetched {
+                    self.report.assets_fetched += 1;
+                } else {
+                    self.report.assets_cached += 1;
+                }
+                self.report.bytes_fetched += f.downloaded;
+                if self.needed.contains(&hash) {
+                    self.missing = self.missing.saturating_sub(1);
+                }
+                self.loaded.insert(hash);
+                self.settle();
+                Ok(())
+            }
+            // An asset of a generation since collected: the delta that replaces it is due.
+            Err(AssetError::Client(ClientError::Server { body, .. }))
+                if body.error.code == ErrorCode::NotFound =>
+            {
+                self.report.assets_gone += 1;
+                Ok(())
+            }
+            Err(error) => Err(WalkError::Asset { hash, error }),
+        }
+    }
+
+    /// The next asset to download: the oldest queued that the cut still needs.
+    fn next_fetch(&mut self) -> Option<String> {
+        while let Some(hash) = self.queue.pop_front() {
+            self.queued.remove(&hash);
+            if self.needed.contains(&hash)
+                && !self.loaded.contains(&hash)
+                && self.inflight.insert(hash.clone())
+            {
+                return Some(hash);
+            }
+        }
+        None
+    }
+
+    /// When every asset of the cut is loaded, the views it answers are loaded.
+    fn settle(&mut self) {
+        if !self.cut.started() || self.missing > 0 {
+            return;
+        }
+        let now = Instant::now();
+        if self.report.first_complete_ms.is_none() {
+            self.report.first_complete_ms =
+                Some(now.duration_since(self.start).as_secs_f64() * 1e3);
+        }
+        let answered = self.cut.view();
+        let later = self.sent.split_off(&(answered + 1));
+        for (_, sent) in std::mem::replace(&mut self.sent, later) {
+            self.latencies.push(now.duration_since(sent));
+        }
+    }
+
+    fn finish(mut self) -> WalkReport {
+        let mut r = std::mem::take(&mut self.report);
+        r.seconds = self.start.elapsed().as_secs_f64();
+        r.views_loaded = self.latencies.len() as u64;
+        r.views_unloaded = self.sent.len() as u64;
+        r.view_latency_ms = Latencies::of(&self.latencies);
+        r.incomplete_share = if r.frames > 0 {
+            r.incomplete_frames as f64 / r.frames as f64
+        } else {
+            0.0
+        };
+        r.final_entries = self.cut.len();
+        r.final_generation = self.cut.generation();
+        r
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_polyline_interpolates_by_distance() {
+        let p =
+            Polyline::new(&[[0.0, 0.0, 0.0], [10.0, 0.0, 0.0], [10.0, 0.0, 5.0]]).expect("a path");
+        assert_eq!(p.length(), 15.0);
+        assert_eq!(p.at(0.0), [0.0, 0.0, 0.0]);
+        assert_eq!(p.at(2.5), [2.5, 0.0, 0.0]);
+        assert_eq!(p.at(10.0), [10.0, 0.0, 0.0]);
+        assert_eq!(p.at(12.0), [10.0, 0.0, 2.0]);
+        assert_eq!(p.at(15.0), [10.0, 0.0, 5.0]);
+        assert_eq!(p.at(99.0), [10.0, 0.0, 5.0]);
+        assert_eq!(p.at(-1.0), [0.0, 0.0, 0.0]);
+        // Walking turns back at the end.
+        assert_eq!(p.walked(12.0), [10.0, 0.0, 2.0]);
+        assert_eq!(p.walked(18.0), [10.0, 0.0, 2.0]);
+        assert_eq!(p.walked(25.0), [5.0, 0.0, 0.0]);
+        assert_eq!(p.walked(30.0), [0.0, 0.0, 0.0]);
+        assert_eq!(p.walked(32.0), [2.0, 0.0, 0.0]);
+    }
+
+    #[test]
+    fn degenerate_paths_stand_still_and_bad_ones_are_refused() {
+        let one = Polyline::new(&[[1.0, 2.0, 3.0]]).expect("one point");
+        assert_eq!(one.length(), 0.0);
+        assert_eq!(one.walked(100.0), [1.0, 2.0, 3.0]);
+        let repeated =
+            Polyline::new(&[[1.0, 0.0, 0.0], [1.0, 0.0, 0.0], [2.0, 0.0, 0.0]]).expect("a path");
+        assert_eq!(repeated.at(0.5), [1.5, 0.0, 0.0]);
+        assert_eq!(repeated.at(0.0), [1.0, 0.0, 0.0]);
+        assert!(Polyline::new(&[]).is_err());
+        assert!(Polyline::new(&[[0.0, f64::NAN, 0.0]]).is_err());
+    }
+
+    #[test]
+    fn latencies_are_nearest_rank_percentiles() {
+        let samples: Vec<Duration> = (1..=100).map(Duration::from_millis).collect();
+        let l = Latencies::of(&samples);
+        assert_eq!(l.count, 100);
+        assert!((l.p50 - 50.0).abs() < 1e-9);
+        assert!((l.p99 - 99.0).abs() < 1e-9);
+        assert!((l.max - 100.0).abs() < 1e-9);
+        assert_eq!(Latencies::of(&[]), Latencies::default());
+    }
+}
