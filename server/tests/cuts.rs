@@ -844,3 +844,78 @@ async fn bad_stream_messages_get_errors_and_limits_close() {
     held.apply(&m);
     held.equals(&fresh_cut(&server, &view).await);
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_client_that_never_reads_is_dropped_and_others_go_on() {
+    let (_dir, world, _) = world("slow");
+    let server = serve(
+        &world,
+        Config {
+            rebuild: false,
+            stream: horizon_server::service::StreamLimits {
+                send_timeout: Duration::from_secs(1),
+                ..Default::default()
+            },
+            ..Config::default()
+        },
+    )
+    .await;
+    // The slow client asks for big cuts, near and far by turns, and never reads.
+    let mut slow = connect(&server).await;
+    let near = View {
+        min_solid_angle: 1e-7,
+        ..View::at([60.0, 2.0, 60.0])
+    };
+    let far = View {
+        min_solid_angle: 0.5,
+        ..View::at([-5000.0, 2.0, 60.0])
+    };
+    let mut bystander = connect(&server).await;
+    let mut held = Held::default();
+    let mut view = View::at([-100.0, 5.0, 64.0]);
+    send(&mut bystander, view_message(1, &view)).await;
+    held.apply(&next(&mut bystander).await.unwrap());
+    let mut sent = 0;
+    for i in 0..150u64 {
+        let v = if i % 2 == 0 { &near } else { &far };
+        if slow
+            .send(Message::Text(view_message(i, v).into()))
+            .await
+            .is_err()
+        {
+            break;
+        }
+        sent += 1;
+        tokio::time::sleep(Duration::from_millis(20)).await;
+        // Meanwhile the bystander walks and gets every delta.
+        if i % 15 == 0 {
+            view.eye[0] += 40.0;
+            send(&mut bystander, view_message(2 + i, &view)).await;
+            let expected = fresh_cut(&server, &view).await;
+            let same = expected.entries.len() == held.entries.len()
+                && expected
+                    .entries
+                    .iter()
+                    .all(|e| held.entries.contains_key(&e.id));
+            if !same {
+                held.apply(&next(&mut bystander).await.unwrap());
+                held.equals(&expected);
+            }
+        }
+    }
+    // The server gave up on the slow client instead of queueing for it: reading now finds
+    // the end of the stream after at most what the socket buffers held.
+    let mut read = 0;
+    loop {
+        match tokio::time::timeout(PATIENCE, slow.next()).await {
+            Ok(Some(Ok(Message::Text(_)))) => read += 1,
+            Ok(Some(Ok(_))) => {}
+            Ok(Some(Err(_)) | None) => break,
+            Err(_) => panic!("the slow stream is still open after {read} messages"),
+        }
+    }
+    assert!(
+        read < sent,
+        "{read} messages for {sent} views: nothing was dropped"
+    );
+}
