@@ -23,7 +23,24 @@ use horizon_protocol::{Budgets, CutResponse, EntryKind, ServerMessage, View};
 use serde::Serialize;
 
 fn main() -> ExitCode {
-    let cli = Cli::parse();
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) if !e.use_stderr() => {
+            // --help and --version.
+            let _ = e.print();
+            return ExitCode::SUCCESS;
+        }
+        Err(e) => {
+            let rendered = e.to_string();
+            let line = rendered.lines().next().unwrap_or("bad arguments");
+            let line = line.strip_prefix("error: ").unwrap_or(line);
+            let _ = writeln!(
+                std::io::stderr(),
+                "horizon-client: error: {line} (see --help)"
+            );
+            return ExitCode::FAILURE;
+        }
+    };
     let result = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()
@@ -76,8 +93,9 @@ enum Command {
         /// Metres between views.
         #[arg(long, default_value_t = 2.0)]
         step: f64,
-        /// Seconds to wait for the answer to a view before the next.
-        #[arg(long, default_value_t = 5.0)]
+        /// Seconds to wait for the answer to a view before the next (a view that leaves the
+        /// cut as it was gets none).
+        #[arg(long, default_value_t = 1.0)]
         wait: f64,
         /// Print the report as JSON.
         #[arg(long)]
@@ -459,13 +477,15 @@ async fn walk_command(
         report.assets_fetched, report.bytes_fetched, report.assets_cached, report.assets_gone
     ))?;
     out(&format!(
-        "view loaded: p50 {:.0} ms, p99 {:.0} ms, max {:.0} ms over {} views ({} not loaded); \
+        "view loaded: p50 {:.0} ms, p99 {:.0} ms, max {:.0} ms over {} answered views \
+         ({} not loaded at the end; {} views without a message of their own); \
          first complete view {}",
         l.p50,
         l.p99,
         l.max,
         l.count,
         report.views_unloaded,
+        report.views_unanswered,
         report
             .first_complete_ms
             .map_or("never".to_owned(), |ms| format!("{ms:.0} ms"))

@@ -157,12 +157,16 @@ pub struct WalkReport {
     pub assets_gone: u64,
     /// Body bytes downloaded.
     pub bytes_fetched: u64,
-    /// Views whose cut was loaded whole before the walk ended.
+    /// Views a message answered (named in its `view`) whose cut was loaded whole before the
+    /// walk ended: the samples of `view_latency_ms`.
     pub views_loaded: u64,
-    /// Views sent whose cut was not loaded whole when the walk ended.
+    /// Views a message answered whose cut was not loaded whole when the walk ended.
     pub views_unloaded: u64,
-    /// From sending a view until every asset of the cut that answered it (or a later one)
-    /// was loaded.
+    /// Views no message named: the server sends nothing for a view that leaves the cut as it
+    /// was, and answers views that queue up behind a message with one delta for the last.
+    pub views_unanswered: u64,
+    /// For each view a message answered: from sending the view until every asset of the cut
+    /// after that message (and any message that came before they loaded) was loaded.
     pub view_latency_ms: Latencies,
     /// From the start until the first cut was loaded whole.
     pub first_complete_ms: Option<f64>,
@@ -361,8 +365,12 @@ struct Walker {
     needed: HashSet<String>,
     /// How many of them are not loaded.
     missing: usize,
-    /// Views sent and not yet loaded: id -> when sent.
+    /// Views sent and not answered yet: id -> when sent.
     sent: BTreeMap<u64, Instant>,
+    /// When the views answered, but whose cut is not loaded yet, were sent.
+    awaiting: Vec<Instant>,
+    /// Views the server answered with no message of their own.
+    unanswered: u64,
     latencies: Vec<Duration>,
     report: WalkReport,
 }
@@ -380,6 +388,8 @@ impl Walker {
             needed: HashSet::new(),
             missing: 0,
             sent: BTreeMap::new(),
+            awaiting: Vec::new(),
+            unanswered: 0,
             latencies: Vec::new(),
             report: WalkReport::default(),
         }
@@ -423,6 +433,17 @@ impl Walker {
         self.cut
             .check_complete()
             .map_err(|error| WalkError::Incomplete { seq, error })?;
+        // The views before the one answered got no message of their own.
+        let answered = self.cut.view();
+        let later = self.sent.split_off(&(answered + 1));
+        let earlier = std::mem::replace(&mut self.sent, later);
+        for (id, sent) in earlier {
+            if id == answered {
+                self.awaiting.push(sent);
+            } else {
+                self.unanswered += 1;
+            }
+        }
         for entry in arrived {
             for asset in &entry.assets {
                 let h = &asset.hash;
@@ -496,7 +517,7 @@ impl Walker {
         None
     }
 
-    /// When every asset of the cut is loaded, the views it answers are loaded.
+    /// When every asset of the cut is loaded, the views awaiting it are loaded.
     fn settle(&mut self) {
         if !self.cut.started() || self.missing > 0 {
             return;
@@ -506,9 +527,7 @@ impl Walker {
             self.report.first_complete_ms =
                 Some(now.duration_since(self.start).as_secs_f64() * 1e3);
         }
-        let answered = self.cut.view();
-        let later = self.sent.split_off(&(answered + 1));
-        for (_, sent) in std::mem::replace(&mut self.sent, later) {
+        for sent in self.awaiting.drain(..) {
             self.latencies.push(now.duration_since(sent));
         }
     }
@@ -517,7 +536,8 @@ impl Walker {
         let mut r = std::mem::take(&mut self.report);
         r.seconds = self.start.elapsed().as_secs_f64();
         r.views_loaded = self.latencies.len() as u64;
-        r.views_unloaded = self.sent.len() as u64;
+        r.views_unloaded = self.awaiting.len() as u64;
+        r.views_unanswered = self.unanswered + self.sent.len() as u64;
         r.view_latency_ms = Latencies::of(&self.latencies);
         r.incomplete_share = if r.frames > 0 {
             r.incomplete_frames as f64 / r.frames as f64
