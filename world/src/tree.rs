@@ -8,7 +8,7 @@
 //! held: the same nodes, hence the same aggregate keys, so nothing built is rebuilt after a
 //! restart.
 
-use std::collections::{BTreeMap, BTreeSet, HashMap};
+use std::collections::{BTreeMap, BTreeSet};
 
 use glam::{Affine3A, Vec3};
 use horizon_bvh::{Bvh, NewObject, NodeId, ObjectId, Sphere};
@@ -30,9 +30,9 @@ pub struct Tree {
     /// World object id -> tree object id.
     ids: BTreeMap<u64, ObjectId>,
     /// Tree object id -> world object id.
-    back: HashMap<ObjectId, u64>,
-    /// World object id -> the generation that last placed or moved it.
-    placed: HashMap<u64, u64>,
+    back: Vec<u64>,
+    /// Tree object id -> the generation that last placed or moved it.
+    placed: Vec<u64>,
     /// The same, ordered by generation: the objects placed after a generation (the pending
     /// objects of a cut) are a range of it.
     by_generation: BTreeSet<(u64, u64)>,
@@ -87,13 +87,16 @@ impl Tree {
     }
 
     fn with_ids(bvh: Bvh, generation: u64, ids: BTreeMap<u64, ObjectId>) -> Self {
-        let back = ids.iter().map(|(&w, &t)| (t, w)).collect();
+        let mut back = Vec::new();
+        for (&w, &t) in &ids {
+            set_slot(&mut back, t, w);
+        }
         Self {
             bvh,
             generation,
             ids,
             back,
-            placed: HashMap::new(),
+            placed: Vec::new(),
             by_generation: BTreeSet::new(),
         }
     }
@@ -110,21 +113,35 @@ impl Tree {
     }
 
     fn place(&mut self, object: u64, generation: u64) {
-        if let Some(old) = self.placed.insert(object, generation) {
-            self.by_generation.remove(&(old, object));
+        self.unplace(object);
+        if let Some(&id) = self.ids.get(&object) {
+            set_slot(&mut self.placed, id, generation);
+            self.by_generation.insert((generation, object));
         }
-        self.by_generation.insert((generation, object));
     }
 
     fn unplace(&mut self, object: u64) {
-        if let Some(old) = self.placed.remove(&object) {
-            self.by_generation.remove(&(old, object));
+        if let Some(&id) = self.ids.get(&object) {
+            if let Some(old) = self.placed.get_mut(id.0 as usize) {
+                if *old != NO_SLOT {
+                    self.by_generation.remove(&(*old, object));
+                    *old = NO_SLOT;
+                }
+            }
         }
     }
 
     /// The generation that last placed or moved a world object (0 if unknown).
     pub fn placed(&self, object: u64) -> u64 {
-        self.placed.get(&object).copied().unwrap_or(0)
+        self.ids.get(&object).map_or(0, |&id| self.placed_at(id))
+    }
+
+    /// The generation that last placed or moved a tree object (0 if unknown).
+    pub fn placed_at(&self, object: ObjectId) -> u64 {
+        match self.placed.get(object.0 as usize) {
+            Some(&g) if g != NO_SLOT => g,
+            _ => 0,
+        }
     }
 
     /// The world ids of the objects placed or moved after `generation`.
@@ -153,7 +170,7 @@ impl Tree {
                 let d = descriptors.descriptors_of(model)?;
                 let id = self.bvh.insert(&new_object(model, transform, &d))?;
                 self.ids.insert(change.object, id);
-                self.back.insert(id, change.object);
+                set_slot(&mut self.back, id, change.object);
                 self.place(change.object, change.generation);
                 touched.extend(self.ancestors(id));
             }
@@ -166,9 +183,9 @@ impl Tree {
             }
             (None, Some(id)) => {
                 self.bvh.remove(id)?;
-                self.ids.remove(&change.object);
-                self.back.remove(&id);
                 self.unplace(change.object);
+                self.ids.remove(&change.object);
+                set_slot(&mut self.back, id, NO_SLOT);
             }
             (None, None) => {
                 return Err(WorldError::Inconsistent(format!(
@@ -190,7 +207,10 @@ impl Tree {
 
     /// The world id of a tree object.
     pub fn world_id(&self, object: ObjectId) -> Option<u64> {
-        self.back.get(&object).copied()
+        self.back
+            .get(object.0 as usize)
+            .copied()
+            .filter(|&w| w != NO_SLOT)
     }
 
     /// The nodes from `object`'s leaf up to the root.
@@ -225,6 +245,18 @@ impl Tree {
         let ids = stored.ids.into_iter().collect();
         Ok(Self::with_ids(stored.bvh, stored.generation, ids))
     }
+}
+
+/// An empty slot of the tree-id-indexed tables.
+const NO_SLOT: u64 = u64::MAX;
+
+/// Sets `table[id]`, growing it with empty slots.
+fn set_slot(table: &mut Vec<u64>, id: ObjectId, value: u64) {
+    let i = id.0 as usize;
+    if table.len() <= i {
+        table.resize(i + 1, NO_SLOT);
+    }
+    table[i] = value;
 }
 
 /// A placed model's world bounding sphere: its model sphere through its transform.

@@ -27,8 +27,10 @@
 //! additions naming the entries they replace (load before drop).
 
 use std::cmp::Ordering;
-use std::collections::{BinaryHeap, HashMap, HashSet};
+use std::collections::BinaryHeap;
 use std::sync::{Arc, RwLock};
+
+use foldhash::{HashMap, HashMapExt, HashSet, HashSetExt};
 
 use glam::{Affine3A, Vec3};
 use horizon_aggregate::AggregateManifest;
@@ -51,6 +53,8 @@ pub fn plan(served: &Served<'_>, models: &ModelTable, view: &View) -> Plan {
 /// entries are made from it by [`Plan::entries`] or [`Plan::entry`].
 #[derive(Clone, Debug, Default)]
 pub struct Plan {
+    /// The manifest whose aggregates it names.
+    pub manifest: Option<Arc<AggregateManifest>>,
     /// The generation of the tree it was planned on.
     pub generation: u64,
     /// The published generation whose aggregates it names.
@@ -69,8 +73,8 @@ pub struct Plan {
 /// One planned entry.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Planned {
-    /// The wire id.
-    pub id: String,
+    /// What names it: the wire id's parts.
+    pub key: Key,
     /// What it draws.
     pub what: Drawn,
     /// Objects it counts.
@@ -83,6 +87,26 @@ pub struct Planned {
     pub radius: f32,
     /// Solid angle from the eye: exact for an object, the worst case for an aggregate.
     pub solid_angle: f32,
+}
+
+/// An entry's identity: `o:<object>@<placed>` or `n:<node>@<hash>`, with the aggregate's
+/// hash cut to its first 64 bits (the whole hash is in the plan's manifest).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Key {
+    /// A world object and the generation that placed it.
+    Object {
+        /// World id.
+        object: u64,
+        /// Generation of its placement.
+        placed: u64,
+    },
+    /// A node and its aggregate's content.
+    Aggregate {
+        /// The node.
+        node: u32,
+        /// The first 64 bits of its GLB's hash.
+        content: u64,
+    },
 }
 
 /// What a planned entry draws.
@@ -99,18 +123,10 @@ pub enum Drawn {
         /// Model to world.
         transform: Affine3A,
     },
-    /// A node's published aggregate.
+    /// A node's published aggregate (in the plan's manifest).
     Aggregate {
         /// The node.
         node: NodeId,
-        /// Its GLB's hash.
-        glb: String,
-        /// GLB bytes.
-        bytes: u64,
-        /// Expanded triangles.
-        triangles: u64,
-        /// Primitives.
-        draw_calls: u64,
     },
 }
 
@@ -475,7 +491,10 @@ impl<'a> Planner<'a> {
                 return None;
             };
             Some(Planned {
-                id: format!("o:{object}@{}", tree.placed(object)),
+                key: Key::Object {
+                    object,
+                    placed: tree.placed_at(o),
+                },
                 what: Drawn::Object {
                     object,
                     tree_id: o,
@@ -505,16 +524,12 @@ impl<'a> Planner<'a> {
                         continue;
                     }
                     let sphere = n.outer_sphere();
-                    let stats = &entry.stats;
                     items.push(Planned {
-                        id: format!("n:{}@{}", node.0, entry.glb),
-                        what: Drawn::Aggregate {
-                            node,
-                            glb: entry.glb.clone(),
-                            bytes: stats.bytes as u64,
-                            triangles: stats.triangles_out,
-                            draw_calls: stats.submeshes.max(1) as u64,
+                        key: Key::Aggregate {
+                            node: node.0,
+                            content: content_bits(&entry.glb),
                         },
+                        what: Drawn::Aggregate { node },
                         covers,
                         pending: false,
                         center: sphere.centre.to_array(),
@@ -527,9 +542,10 @@ impl<'a> Planner<'a> {
         items.sort_by(|a, b| {
             b.solid_angle
                 .total_cmp(&a.solid_angle)
-                .then_with(|| a.id.cmp(&b.id))
+                .then_with(|| a.key.cmp(&b.key))
         });
         Plan {
+            manifest: self.served.manifest.clone(),
             generation: tree.generation,
             published,
             objects: tree.bvh.len() as u64,
@@ -541,56 +557,6 @@ impl<'a> Planner<'a> {
 }
 
 impl Planned {
-    /// The wire entry.
-    pub fn entry(&self) -> Entry {
-        let (kind, asset, bytes, triangles, draw_calls, matrix, role) = match &self.what {
-            Drawn::Object {
-                model, transform, ..
-            } => (
-                EntryKind::Object,
-                model.hash.clone(),
-                model.bytes,
-                model.triangles,
-                model.draw_calls,
-                matrix_of(transform),
-                AssetRole::Model,
-            ),
-            Drawn::Aggregate {
-                glb,
-                bytes,
-                triangles,
-                draw_calls,
-                ..
-            } => (
-                EntryKind::Aggregate,
-                glb.clone(),
-                *bytes,
-                *triangles,
-                *draw_calls,
-                matrix_of(&Affine3A::IDENTITY),
-                AssetRole::Mesh,
-            ),
-        };
-        Entry {
-            id: self.id.clone(),
-            kind,
-            assets: vec![Asset {
-                hash: asset.clone(),
-                bytes,
-                role,
-            }],
-            placements: vec![Placement { asset, matrix }],
-            level: 0,
-            pending: self.pending,
-            bytes,
-            triangles,
-            draw_calls,
-            center: self.center,
-            radius: self.radius,
-            covers: self.covers,
-        }
-    }
-
     /// The same entry, as a client holding it would compare it.
     fn same(&self, other: &Planned) -> bool {
         self.covers == other.covers
@@ -601,7 +567,7 @@ impl Planned {
 
     fn node(&self) -> Option<NodeId> {
         match self.what {
-            Drawn::Aggregate { node, .. } => Some(node),
+            Drawn::Aggregate { node } => Some(node),
             Drawn::Object { .. } => None,
         }
     }
@@ -612,6 +578,13 @@ impl Planned {
             Drawn::Aggregate { .. } => None,
         }
     }
+}
+
+/// The first 64 bits of a hex content hash (0 for a hash too short to have them).
+fn content_bits(hash: &str) -> u64 {
+    hash.get(..16)
+        .and_then(|h| u64::from_str_radix(h, 16).ok())
+        .unwrap_or(0)
 }
 
 /// A 3x4 column-major matrix: the three axes, then the translation.
@@ -627,25 +600,89 @@ fn matrix_of(t: &Affine3A) -> [f32; 12] {
 impl Plan {
     /// The wire entries.
     pub fn entries(&self) -> Vec<Entry> {
-        self.items.iter().map(Planned::entry).collect()
+        self.items.iter().map(|p| self.entry(p)).collect()
+    }
+
+    /// The aggregate a planned entry draws, if it is one.
+    fn aggregate(&self, p: &Planned) -> Option<&horizon_aggregate::AggregateEntry> {
+        let node = p.node()?;
+        self.manifest.as_ref()?.nodes.get(&node.0)
+    }
+
+    /// A planned entry's wire id.
+    pub fn id(&self, p: &Planned) -> String {
+        match p.key {
+            Key::Object { object, placed } => format!("o:{object}@{placed}"),
+            Key::Aggregate { node, .. } => {
+                let hash = self.aggregate(p).map_or("", |a| a.glb.as_str());
+                format!("n:{node}@{hash}")
+            }
+        }
+    }
+
+    /// A planned entry as the wire carries it.
+    pub fn entry(&self, p: &Planned) -> Entry {
+        let (kind, asset, bytes, triangles, draw_calls, matrix, role) = match &p.what {
+            Drawn::Object {
+                model, transform, ..
+            } => (
+                EntryKind::Object,
+                model.hash.clone(),
+                model.bytes,
+                model.triangles,
+                model.draw_calls,
+                matrix_of(transform),
+                AssetRole::Model,
+            ),
+            Drawn::Aggregate { .. } => {
+                let a = self.aggregate(p);
+                let stats = a.map(|a| &a.stats);
+                (
+                    EntryKind::Aggregate,
+                    a.map_or(String::new(), |a| a.glb.clone()),
+                    stats.map_or(0, |s| s.bytes as u64),
+                    stats.map_or(0, |s| s.triangles_out),
+                    stats.map_or(1, |s| s.submeshes.max(1) as u64),
+                    matrix_of(&Affine3A::IDENTITY),
+                    AssetRole::Mesh,
+                )
+            }
+        };
+        Entry {
+            id: self.id(p),
+            kind,
+            assets: vec![Asset {
+                hash: asset.clone(),
+                bytes,
+                role,
+            }],
+            placements: vec![Placement { asset, matrix }],
+            level: 0,
+            pending: p.pending,
+            bytes,
+            triangles,
+            draw_calls,
+            center: p.center,
+            radius: p.radius,
+            covers: p.covers,
+        }
     }
 
     /// The delta from `before` (what a client holds) to this plan: entries to remove, with
     /// why, then entries to add, each naming the removed entries whose objects it now
     /// draws. `served` is the tree this plan was made on; ancestry is read from it.
     pub fn diff(&self, before: &Plan, served: &Served<'_>) -> (Vec<Addition>, Vec<Removal>) {
-        let now: HashMap<&str, &Planned> = self.items.iter().map(|p| (p.id.as_str(), p)).collect();
-        let old: HashMap<&str, &Planned> =
-            before.items.iter().map(|p| (p.id.as_str(), p)).collect();
+        let now: HashMap<Key, &Planned> = self.items.iter().map(|p| (p.key, p)).collect();
+        let old: HashMap<Key, &Planned> = before.items.iter().map(|p| (p.key, p)).collect();
         let gone: Vec<&Planned> = before
             .items
             .iter()
-            .filter(|p| now.get(p.id.as_str()).is_none_or(|n| !n.same(p)))
+            .filter(|p| now.get(&p.key).is_none_or(|n| !n.same(p)))
             .collect();
         let fresh: Vec<&Planned> = self
             .items
             .iter()
-            .filter(|p| old.get(p.id.as_str()).is_none_or(|o| !o.same(p)))
+            .filter(|p| old.get(&p.key).is_none_or(|o| !o.same(p)))
             .collect();
         if gone.is_empty() && fresh.is_empty() {
             return (Vec::new(), Vec::new());
@@ -655,7 +692,7 @@ impl Plan {
         // Where each removed entry sat in the tree now: its node, or its object's leaf.
         let place_of = |p: &Planned| -> Option<NodeId> {
             match p.what {
-                Drawn::Aggregate { node, .. } => Some(node),
+                Drawn::Aggregate { node } => Some(node),
                 Drawn::Object { object, .. } => tree
                     .tree_id(object)
                     .and_then(|o| bvh.object(o))
@@ -683,13 +720,14 @@ impl Plan {
         let mut replaces: Vec<Vec<String>> = vec![Vec::new(); fresh.len()];
         let mut removals = Vec::with_capacity(gone.len());
         for p in &gone {
+            let id = before.id(p);
             let reason = if let Some(&i) = p
                 .node()
                 .and_then(|n| fresh_nodes.get(&n))
                 .or_else(|| p.object().and_then(|o| fresh_objects.get(&o)))
             {
                 // The same node or object, in a new version.
-                replaces[i].push(p.id.clone());
+                replaces[i].push(id.clone());
                 RemoveReason::Replaced
             } else if p.object().is_some_and(|o| tree.tree_id(o).is_none()) {
                 RemoveReason::Deleted
@@ -698,26 +736,23 @@ impl Plan {
                 .find_map(|a| fresh_nodes.get(&a))
             {
                 // An ancestor came in: the viewer went away.
-                replaces[i].push(p.id.clone());
+                replaces[i].push(id.clone());
                 RemoveReason::Coarsened
             } else {
                 // Finer entries came in (found below, from their side), or the tree moved.
                 RemoveReason::Refined
             };
-            removals.push(Removal {
-                id: p.id.clone(),
-                reason,
-            });
+            removals.push(Removal { id, reason });
         }
         for (i, p) in fresh.iter().enumerate() {
             let start = match p.what {
-                Drawn::Aggregate { node, .. } => bvh.node(node).and_then(|r| r.parent()),
+                Drawn::Aggregate { node } => bvh.node(node).and_then(|r| r.parent()),
                 Drawn::Object { .. } => place_of(p),
             };
             for a in ancestors(start) {
                 if let Some(&g) = gone_nodes.get(&a) {
                     if removals[g].reason == RemoveReason::Refined {
-                        replaces[i].push(gone[g].id.clone());
+                        replaces[i].push(removals[g].id.clone());
                     }
                 }
             }
@@ -726,7 +761,7 @@ impl Plan {
             .iter()
             .zip(replaces)
             .map(|(p, replaces)| Addition {
-                entry: p.entry(),
+                entry: self.entry(p),
                 replaces,
             })
             .collect();

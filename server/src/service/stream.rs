@@ -182,6 +182,8 @@ struct Shared {
     sent: AtomicU64,
     /// The last `seq` acknowledged (0: none yet).
     acked: AtomicU64,
+    /// The id of the last view the writer planned.
+    planned: AtomicU64,
 }
 
 async fn serve(socket: WebSocket, state: AppState, slot: Slot) {
@@ -282,7 +284,11 @@ async fn read(
             Ok(ClientMessage::View { id, view }) => match view.check() {
                 Ok(()) => {
                     metrics::counter!("horizon_stream_views_total").increment(1);
-                    views.send_replace(Some((id, view)));
+                    let before = views.send_replace(Some((id, view)));
+                    if before.is_some_and(|(b, _)| b > shared.planned.load(Ordering::SeqCst)) {
+                        // Replaced before the writer planned it.
+                        metrics::counter!("horizon_stream_coalesced_total").increment(1);
+                    }
                 }
                 Err(m) => {
                     let _ = control.try_send(error(ErrorCode::BadQuery, m));
@@ -374,6 +380,7 @@ async fn write(
         let Some((view_id, view)) = *latest.borrow_and_update() else {
             continue;
         };
+        shared.planned.store(view_id, Ordering::SeqCst);
         let before = held.take();
         let want_reset = reset || before.is_none();
         let planned = {
