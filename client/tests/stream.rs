@@ -304,7 +304,14 @@ async fn checked_walk(base: &str, seed: u64, steps: usize, checked: &mut Checked
         view.eye = path.at(path.length() * step as f64 / steps as f64);
         // Now and then a budget changes on the way.
         if rng.chance(0.1) {
-            view.budgets.max_triangles = Some(200 + rng.below(2_000) as u64);
+            let b = &mut view.budgets;
+            match rng.below(5) {
+                0 => b.max_triangles = Some(200 + rng.below(2_000) as u64),
+                1 => b.max_bytes = Some(2_000 + rng.below(20_000) as u64),
+                2 => b.max_draw_calls = Some(1 + rng.below(8) as u64),
+                3 => b.max_entries = Some(5 + rng.below(100) as u64),
+                _ => *b = horizon_protocol::Budgets::default(),
+            }
         }
         stream.send_view(id, &view).await.expect("a view is sent");
         views.insert(id, view);
