@@ -83,10 +83,10 @@ struct UploadRun {
 }
 
 #[derive(Debug, Default, Serialize)]
-struct Percentiles {
-    p50: f64,
-    p99: f64,
-    max: f64,
+pub(crate) struct Percentiles {
+    pub(crate) p50: f64,
+    pub(crate) p99: f64,
+    pub(crate) max: f64,
 }
 
 #[derive(Debug, Default, Serialize)]
@@ -458,7 +458,7 @@ async fn sustain(
 /// An open-loop load: requests scheduled at `rate` per second for `seconds`, each sent at its
 /// time whatever the ones before are doing; latency from the scheduled time to the body's
 /// end. Returns (requests, errors, latencies).
-async fn open_loop(
+pub(crate) async fn open_loop(
     urls: Vec<String>,
     rate: u64,
     seconds: u64,

@@ -185,6 +185,59 @@ pub fn print(r: &Report, json: bool) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// `GET /v1/cut` at `rate` requests a second for `seconds`, open loop, at `views` seeded
+/// street-level eyes: (requests, errors, latency percentiles in ms).
+pub fn bench_cut(
+    url: &str,
+    rate: u64,
+    seconds: u64,
+    views: usize,
+    seed: u64,
+    height: f64,
+) -> anyhow::Result<serde_json::Value> {
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()?;
+    runtime.block_on(async {
+        let info: WorldInfo = reqwest::get(format!("{url}/v1/world"))
+            .await?
+            .error_for_status()?
+            .json()
+            .await?;
+        let b = info.bounds.context("the world is empty")?;
+        let mut rng = Rng::new(seed ^ 0xC07);
+        let urls: Vec<String> = (0..views.max(1))
+            .map(|_| {
+                let x = f64::from(b.min[0]) + rng.unit_f64() * f64::from(b.max[0] - b.min[0]);
+                let z = f64::from(b.min[2]) + rng.unit_f64() * f64::from(b.max[2] - b.min[2]);
+                format!("{url}/v1/cut?eye={x:.2},{height},{z:.2}")
+            })
+            .collect();
+        let pid = find_server();
+        let cpu_before = pid.and_then(cpu_seconds);
+        let started = Instant::now();
+        let (requests, errors, p) =
+            crate::bench_service::open_loop(urls, rate, seconds, seed).await?;
+        let wall = started.elapsed().as_secs_f64();
+        let cpu = pid
+            .and_then(cpu_seconds)
+            .zip(cpu_before)
+            .map(|(b, a)| (b - a) / wall);
+        Ok(serde_json::json!({
+            "objects": info.objects,
+            "rate": rate,
+            "seconds": seconds,
+            "requests": requests,
+            "errors": errors,
+            "p50_ms": p.p50,
+            "p99_ms": p.p99,
+            "max_ms": p.max,
+            "server_cpu_cores": cpu,
+            "server_rss_bytes": pid.and_then(rss),
+        }))
+    })
+}
+
 /// Runs the load (see the module docs).
 pub fn run(args: &Args) -> anyhow::Result<Report> {
     let runtime = tokio::runtime::Builder::new_multi_thread()

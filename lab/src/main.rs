@@ -228,6 +228,26 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// `GET /v1/cut` under an open-loop load at seeded street-level eyes: p50 and p99.
+    BenchCut {
+        /// The server, `http://HOST:PORT`.
+        url: String,
+        /// Requests per second.
+        #[arg(long, default_value_t = 500)]
+        rate: u64,
+        /// Seconds.
+        #[arg(long, default_value_t = 30)]
+        seconds: u64,
+        /// Distinct seeded eyes.
+        #[arg(long, default_value_t = 200)]
+        views: usize,
+        /// Seed of the eyes.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Eye height (y), metres.
+        #[arg(long, default_value_t = 2.0)]
+        height: f64,
+    },
     /// Derives Table 1's deduplication thresholds by the paper's procedure (renders from three
     /// directions, SSIM, every pair of models and perturbed variants) and writes table1.json
     /// and table1.md.
@@ -398,6 +418,19 @@ fn main() -> ExitCode {
             };
             load::run(&args).and_then(|r| load::print(&r, json))
         }
+        Command::BenchCut {
+            url,
+            rate,
+            seconds,
+            views,
+            seed,
+            height,
+        } => load::bench_cut(&url, rate, seconds, views, seed, height).and_then(|r| {
+            Ok(horizon_server::outln!(
+                "{}",
+                serde_json::to_string_pretty(&r)?
+            )?)
+        }),
         Command::BenchService {
             world,
             horizon,

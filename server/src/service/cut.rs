@@ -55,6 +55,8 @@ pub fn plan(served: &Served<'_>, models: &ModelTable, view: &View) -> Plan {
 pub struct Plan {
     /// The manifest whose aggregates it names.
     pub manifest: Option<Arc<AggregateManifest>>,
+    /// The model table its objects' assets are read from.
+    pub models: Arc<Models>,
     /// The generation of the tree it was planned on.
     pub generation: u64,
     /// The published generation whose aggregates it names.
@@ -118,8 +120,8 @@ pub enum Drawn {
         object: u64,
         /// The tree's id of it.
         tree_id: ObjectId,
-        /// The model's asset.
-        model: Arc<ModelAsset>,
+        /// The model's number (its asset is in the plan's model table).
+        model: u64,
         /// Model to world.
         transform: Affine3A,
     },
@@ -146,17 +148,17 @@ pub struct ModelAsset {
 /// Every model's [`ModelAsset`] by model number, read from the world when a number is new.
 #[derive(Debug, Default)]
 pub struct ModelTable {
-    by_number: RwLock<Vec<Option<Arc<ModelAsset>>>>,
+    by_number: RwLock<Arc<Models>>,
 }
+
+/// The model table at one moment: [`ModelAsset`]s by model number.
+pub type Models = Vec<Option<Arc<ModelAsset>>>;
 
 impl ModelTable {
     /// Makes sure every model number up to those `world` holds is known.
     pub fn refresh(&self, world: &World) -> Result<(), WorldError> {
         let rows = world.all_models()?;
-        let mut table = self
-            .by_number
-            .write()
-            .map_err(|_| WorldError::Inconsistent("model table lock poisoned".into()))?;
+        let mut table: Models = Vec::with_capacity(rows.len());
         for row in rows {
             let count = |key: &str| row.stats.get(key).and_then(|v| v.as_u64()).unwrap_or(0);
             let i = row.number as usize;
@@ -170,14 +172,17 @@ impl ModelTable {
                 draw_calls: count("submeshes").max(1),
             }));
         }
+        *self
+            .by_number
+            .write()
+            .map_err(|_| WorldError::Inconsistent("model table lock poisoned".into()))? =
+            Arc::new(table);
         Ok(())
     }
 
-    fn get(&self, number: u64) -> Option<Arc<ModelAsset>> {
-        self.by_number
-            .read()
-            .ok()
-            .and_then(|t| t.get(number as usize).cloned().flatten())
+    /// The table as it is now.
+    fn snapshot(&self) -> Arc<Models> {
+        self.by_number.read().map(|t| t.clone()).unwrap_or_default()
     }
 }
 
@@ -231,7 +236,7 @@ impl PartialOrd for Candidate {
 struct Planner<'a> {
     served: &'a Served<'a>,
     manifest: Option<&'a AggregateManifest>,
-    models: &'a ModelTable,
+    models: Arc<Models>,
     eye: Vec3,
     min_solid_angle: f32,
     budgets: Budgets,
@@ -266,7 +271,7 @@ impl<'a> Planner<'a> {
         Self {
             served,
             manifest: served.manifest.as_deref(),
-            models,
+            models: models.snapshot(),
             eye: Vec3::new(view.eye[0] as f32, view.eye[1] as f32, view.eye[2] as f32),
             min_solid_angle: view.min_solid_angle as f32,
             budgets,
@@ -419,7 +424,8 @@ impl<'a> Planner<'a> {
         };
         let (bytes, draw_calls, triangles) = self
             .models
-            .get(model)
+            .get(model as usize)
+            .and_then(Option::as_ref)
             .map_or((0, 1, 0), |m| (m.bytes, m.draw_calls, m.triangles));
         self.charge(AssetKey::Model(model), bytes, draw_calls, triangles, sign);
     }
@@ -486,7 +492,8 @@ impl<'a> Planner<'a> {
             let r = tree.bvh.object(o)?;
             let object = tree.world_id(o)?;
             let sphere = r.sphere();
-            let Some(model) = self.models.get(r.model()) else {
+            let model = r.model();
+            if self.models.get(model as usize).is_none_or(Option::is_none) {
                 missing.set(missing.get() + 1);
                 return None;
             };
@@ -546,6 +553,7 @@ impl<'a> Planner<'a> {
         });
         Plan {
             manifest: self.served.manifest.clone(),
+            models: self.models.clone(),
             generation: tree.generation,
             published,
             objects: tree.bvh.len() as u64,
@@ -625,15 +633,18 @@ impl Plan {
         let (kind, asset, bytes, triangles, draw_calls, matrix, role) = match &p.what {
             Drawn::Object {
                 model, transform, ..
-            } => (
-                EntryKind::Object,
-                model.hash.clone(),
-                model.bytes,
-                model.triangles,
-                model.draw_calls,
-                matrix_of(transform),
-                AssetRole::Model,
-            ),
+            } => {
+                let m = self.models.get(*model as usize).and_then(Option::as_ref);
+                (
+                    EntryKind::Object,
+                    m.map_or(String::new(), |m| m.hash.clone()),
+                    m.map_or(0, |m| m.bytes),
+                    m.map_or(0, |m| m.triangles),
+                    m.map_or(1, |m| m.draw_calls),
+                    matrix_of(transform),
+                    AssetRole::Model,
+                )
+            }
             Drawn::Aggregate { .. } => {
                 let a = self.aggregate(p);
                 let stats = a.map(|a| &a.stats);
