@@ -919,3 +919,62 @@ async fn a_client_that_never_reads_is_dropped_and_others_go_on() {
         "{read} messages for {sent} views: nothing was dropped"
     );
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn within_its_safe_radius_a_cut_does_not_change() {
+    let (_dir, world, _) = world("safe");
+    let state = state(&world);
+    // A pending object too, so that its margin counts.
+    let model = world.all_models().unwrap()[1].id.clone();
+    world
+        .apply(
+            None,
+            &[Change::Create {
+                model,
+                transform: Affine3A::from_translation(Vec3::new(30.0, 0.0, 30.0)),
+            }],
+        )
+        .unwrap();
+    let mut rng = horizon_mesh::rng::Rng::new(7);
+    let as_set = |p: &horizon_server::service::cut::Plan| -> HashMap<String, horizon_protocol::Entry> {
+        p.entries().into_iter().map(|e| (e.id.clone(), e)).collect()
+    };
+    let mut checked = 0;
+    let mut positive = 0;
+    for round in 0..300 {
+        let eye = [
+            -60.0 + 250.0 * rng.unit_f64(),
+            1.0 + 60.0 * rng.unit_f64(),
+            -60.0 + 250.0 * rng.unit_f64(),
+        ];
+        let mut view = View::at(eye);
+        view.min_solid_angle = [0.001, 0.0003, 0.01][round % 3];
+        match round % 4 {
+            1 => view.budgets.max_entries = Some(40),
+            2 => view.budgets.max_bytes = Some(20_000),
+            3 => view.budgets.max_triangles = Some(3_000),
+            _ => {}
+        }
+        let plan = state.plan(&view).unwrap();
+        assert!(plan.safe_radius >= 0.0);
+        if plan.safe_radius > 0.0 {
+            positive += 1;
+        }
+        let before = as_set(&plan);
+        for _ in 0..3 {
+            // A step inside the radius, in a random direction.
+            let dir = rng.unit_vector();
+            let step = plan.safe_radius * rng.unit_f64() * 0.999;
+            let mut moved = view;
+            for i in 0..3 {
+                moved.eye[i] += f64::from(dir[i]) * step;
+            }
+            let again = state.plan(&moved).unwrap();
+            assert_eq!(as_set(&again), before, "round {round}: moved {step} of {}", plan.safe_radius);
+            assert_eq!(again.stopped_by, plan.stopped_by);
+            checked += 1;
+        }
+    }
+    assert!(positive > 100, "only {positive} of 300 cuts have room to move");
+    assert_eq!(checked, 900);
+}

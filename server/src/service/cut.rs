@@ -70,6 +70,11 @@ pub struct Plan {
     /// Objects left out because their model is not in the [`ModelTable`] yet (refresh it
     /// and plan again).
     pub missing_models: usize,
+    /// The eye it was planned at.
+    pub eye: [f64; 3],
+    /// How far the eye may move from `eye`, with the same world and the rest of the view
+    /// the same, before the plan could differ: within it, planning again gives this plan.
+    pub safe_radius: f64,
 }
 
 /// One planned entry.
@@ -248,6 +253,12 @@ struct Planner<'a> {
     heap: BinaryHeap<Candidate>,
     assets: HashMap<AssetKey, u32>,
     totals: Totals,
+    /// Nodes refinement took (not those refined for want of an aggregate).
+    refined: Vec<NodeId>,
+    /// The node whose refinement a budget refused.
+    stopper: Option<NodeId>,
+    /// Even the coarsest cut was over a budget: nothing was refined by solid angle.
+    over_at_seed: bool,
 }
 
 impl<'a> Planner<'a> {
@@ -281,6 +292,9 @@ impl<'a> Planner<'a> {
             heap: BinaryHeap::new(),
             assets: HashMap::new(),
             totals: Totals::default(),
+            refined: Vec::new(),
+            stopper: None,
+            over_at_seed: false,
         }
     }
 
@@ -301,6 +315,7 @@ impl<'a> Planner<'a> {
     fn refine(&mut self) -> Option<StoppedBy> {
         if let Some(over) = self.over_budget() {
             // Even the coarsest cut the published aggregates allow is over: say so.
+            self.over_at_seed = true;
             return Some(over);
         }
         while let Some(top) = self.heap.pop() {
@@ -328,10 +343,93 @@ impl<'a> Planner<'a> {
                     self.put(unit, -1);
                 }
                 self.put(Unit::Node(node), 1);
+                self.stopper = Some(node);
                 return Some(over);
             }
+            self.refined.push(node);
         }
         None
+    }
+
+    /// How far the eye may move before this cut could change (see [`Plan::safe_radius`]),
+    /// from the margins of every decision refinement took: each refined node stays at or
+    /// over `min_solid_angle` (and, under a byte, draw-call or triangle budget, ahead of the
+    /// node refined after it); each node in the cut stays under it, or (when a budget
+    /// stopped refinement) behind the node the budget refused, which itself stays behind
+    /// every refined node and over `min_solid_angle`; each pending object stays on its side
+    /// of `min_solid_angle`. A node's worst-case distance and an object's distance
+    /// change by at most what the eye moves; solid angles order as radius over distance.
+    fn safe_radius(&self) -> f64 {
+        let bvh = &self.served.tree.bvh;
+        let eye = self.eye.as_dvec3();
+        let omega = f64::from(self.min_solid_angle);
+        // The ratio r/d at which a sphere subtends `omega` (eq. 3 inverted).
+        let t = 1.0 - omega / std::f64::consts::TAU;
+        let ratio = (1.0 - t * t).max(0.0).sqrt();
+        if !(ratio > 0.0) {
+            return 0.0;
+        }
+        let worst = |node: NodeId| -> Option<(f64, f64)> {
+            let n = bvh.node(node)?;
+            let b = n.bound();
+            let d = ((b.centre.as_dvec3() - eye).length() - f64::from(b.radius)).max(0.0);
+            Some((f64::from(n.r_max()), d))
+        };
+        let mut safe = f64::INFINITY;
+        let mut margin = |m: f64| safe = safe.min(m);
+        if !self.over_at_seed {
+            for &node in &self.refined {
+                match worst(node) {
+                    Some((r, d)) => margin(r / ratio - d),
+                    None => margin(0.0),
+                }
+            }
+            // Budgets other than the entry count are not monotone along refinement, so with
+            // one of them the order of refinement must stay the same too: each refined node
+            // ahead of the next (they were taken in order of solid angle).
+            let b = &self.budgets;
+            if b.max_bytes.is_some() || b.max_draw_calls.is_some() || b.max_triangles.is_some() {
+                for pair in self.refined.windows(2) {
+                    match (worst(pair[0]), worst(pair[1])) {
+                        (Some((ra, da)), Some((rb, db))) => margin((ra * db - rb * da) / (ra + rb)),
+                        _ => margin(0.0),
+                    }
+                }
+            }
+            let stopper = self.stopper.and_then(worst);
+            if let Some((rx, dx)) = stopper {
+                margin(rx / ratio - dx);
+                for &node in &self.refined {
+                    if let Some((r, d)) = worst(node) {
+                        margin((r * dx - rx * d) / (r + rx));
+                    }
+                }
+            }
+            for unit in &self.units {
+                let Unit::Node(node) = *unit else { continue };
+                if Some(node) == self.stopper {
+                    continue;
+                }
+                let Some((r, d)) = worst(node) else {
+                    margin(0.0);
+                    continue;
+                };
+                let below = d - r / ratio;
+                match stopper {
+                    Some((rx, dx)) => margin(below.max((rx * d - r * dx) / (rx + r))),
+                    None => margin(below),
+                }
+            }
+        }
+        for &o in &self.pending {
+            if let Some(o) = bvh.object(o) {
+                let sphere = o.sphere();
+                let d = (sphere.centre.as_dvec3() - eye).length();
+                margin((d - f64::from(sphere.radius) / ratio).abs());
+            }
+        }
+        // Half of it, less a millimetre: the planner works in f32.
+        (0.5 * safe - 1e-3).max(0.0)
     }
 
     /// What stands for `node` in the cut: its aggregate if the manifest has one, else its
@@ -484,6 +582,7 @@ impl<'a> Planner<'a> {
     }
 
     fn finish(self, stopped_by: Option<StoppedBy>) -> Plan {
+        let safe_radius = self.safe_radius();
         let tree = self.served.tree;
         let published = self.served.published;
         let mut items = Vec::with_capacity(self.units.len());
@@ -560,6 +659,8 @@ impl<'a> Planner<'a> {
             items,
             stopped_by,
             missing_models: missing.get(),
+            eye: self.eye.as_dvec3().to_array(),
+            safe_radius,
         }
     }
 }

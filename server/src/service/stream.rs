@@ -335,8 +335,11 @@ async fn write(
     let mut held: Option<Plan> = None;
     let mut seq = 0u64;
     let mut reset = true;
-    // Whether the view or the world changed since the last plan.
+    // Whether the view or the world changed since the last plan, and the world alone.
     let mut stale = false;
+    let mut world_changed = false;
+    // The view the held plan was made for.
+    let mut held_view: Option<View> = None;
     loop {
         let waiting_for_ack = {
             let a = shared.acked.load(Ordering::SeqCst);
@@ -352,6 +355,7 @@ async fn write(
                 r = changes.changed() => {
                     if r.is_err() { return; }
                     stale = true;
+                    world_changed = true;
                 }
                 r = acked.changed() => {
                     if r.is_err() { return; }
@@ -381,6 +385,23 @@ async fn write(
             continue;
         };
         shared.planned.store(view_id, Ordering::SeqCst);
+        // Within the held plan's safe radius, with the world and the rest of the view as they
+        // were, planning again would give the same cut: nothing to do.
+        if let (false, false, Some(h), Some(v)) = (reset, world_changed, &held, &held_view) {
+            let moved = (0..3)
+                .map(|i| (view.eye[i] - h.eye[i]).powi(2))
+                .sum::<f64>()
+                .sqrt();
+            let same_rest = v.min_solid_angle == view.min_solid_angle
+                && v.pixel_solid_angle == view.pixel_solid_angle
+                && v.budgets == view.budgets;
+            if same_rest && moved < h.safe_radius {
+                metrics::counter!("horizon_stream_unchanged_total").increment(1);
+                continue;
+            }
+        }
+        world_changed = false;
+        held_view = Some(view);
         let before = held.take();
         let want_reset = reset || before.is_none();
         let planned = {
