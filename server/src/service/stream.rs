@@ -396,7 +396,7 @@ async fn write(
                 && v.pixel_solid_angle == view.pixel_solid_angle
                 && v.budgets == view.budgets;
             if same_rest && moved < h.safe_radius {
-                metrics::counter!("horizon_stream_unchanged_total").increment(1);
+                metrics::counter!("horizon_stream_within_safe_radius_total").increment(1);
                 continue;
             }
         }
