@@ -70,11 +70,84 @@ pub struct Plan {
     /// Objects left out because their model is not in the [`ModelTable`] yet (refresh it
     /// and plan again).
     pub missing_models: usize,
-    /// The eye it was planned at.
-    pub eye: [f64; 3],
-    /// How far the eye may move from `eye`, with the same world and the rest of the view
-    /// the same, before the plan could differ: within it, planning again gives this plan.
-    pub safe_radius: f64,
+    /// What refinement decided, to tell whether a new eye would decide the same.
+    pub decisions: Decisions,
+}
+
+/// The decisions that made a plan, by the node: with the same tree and the same view but
+/// for the eye, planning again gives the same plan exactly when [`Decisions::hold_at`] the
+/// new eye. Refinement took the nodes of `refined` in order of their worst-case solid angle
+/// (each at least `min_solid_angle`), then either ran out of nodes at or over it, or a
+/// budget refused `stopper`; `frontier` is every other node in the cut.
+#[derive(Clone, Debug, Default)]
+pub struct Decisions {
+    min_solid_angle: f32,
+    refined: Vec<NodeId>,
+    frontier: Vec<NodeId>,
+    stopper: Option<NodeId>,
+    over_at_seed: bool,
+    /// A byte, draw-call or triangle budget: totals are not monotone along refinement, so
+    /// the order of the refined nodes matters too.
+    ordered: bool,
+    /// Each pending object, and whether it subtended `min_solid_angle`.
+    pending: Vec<(ObjectId, bool)>,
+}
+
+impl Decisions {
+    /// Whether refinement at `eye`, on the tree the plan was made on, takes the same
+    /// decisions: the same nodes refined (in the same order where it matters), the same node
+    /// refused, every other node left, every pending object on the same side of
+    /// `min_solid_angle`. Ties count as changes (the planner breaks them by node id), so
+    /// "true" is exact: it evaluates the planner's own solid angles.
+    pub fn hold_at(&self, tree: &horizon_world::Tree, eye: [f64; 3]) -> bool {
+        let eye = Vec3::new(eye[0] as f32, eye[1] as f32, eye[2] as f32);
+        let bvh = &tree.bvh;
+        let worst = |node: NodeId| {
+            bvh.node(node).map(|n| {
+                let b = n.bound();
+                worst_case_solid_angle(eye, b.centre, b.radius, n.r_max())
+            })
+        };
+        let min = self.min_solid_angle;
+        for &(o, seen) in &self.pending {
+            let Some(s) = bvh.object(o).map(|o| o.sphere()) else {
+                return false;
+            };
+            if (solid_angle(s.radius, (s.centre - eye).length()) >= min) != seen {
+                return false;
+            }
+        }
+        if self.over_at_seed {
+            return true;
+        }
+        // The weakest refined node, checking the order on the way where it matters.
+        let mut weakest = f32::INFINITY;
+        for &node in &self.refined {
+            let Some(a) = worst(node) else {
+                return false;
+            };
+            if a < min || (self.ordered && a >= weakest && weakest.is_finite()) {
+                return false;
+            }
+            weakest = weakest.min(a);
+        }
+        // Every other node stays behind the refused one, or under the solid angle.
+        let bar = match self.stopper {
+            Some(x) => {
+                let Some(ax) = worst(x) else {
+                    return false;
+                };
+                if ax < min || ax >= weakest {
+                    return false;
+                }
+                ax
+            }
+            None => min,
+        };
+        self.frontier
+            .iter()
+            .all(|&node| worst(node).is_some_and(|a| a < bar))
+    }
 }
 
 /// One planned entry.
@@ -351,87 +424,6 @@ impl<'a> Planner<'a> {
         None
     }
 
-    /// How far the eye may move before this cut could change (see [`Plan::safe_radius`]),
-    /// from the margins of every decision refinement took: each refined node stays at or
-    /// over `min_solid_angle` (and, under a byte, draw-call or triangle budget, ahead of the
-    /// node refined after it); each node in the cut stays under it, or (when a budget
-    /// stopped refinement) behind the node the budget refused, which itself stays behind
-    /// every refined node and over `min_solid_angle`; each pending object stays on its side
-    /// of `min_solid_angle`. A node's worst-case distance and an object's distance
-    /// change by at most what the eye moves; solid angles order as radius over distance.
-    fn safe_radius(&self) -> f64 {
-        let bvh = &self.served.tree.bvh;
-        let eye = self.eye.as_dvec3();
-        let omega = f64::from(self.min_solid_angle);
-        // The ratio r/d at which a sphere subtends `omega` (eq. 3 inverted).
-        let t = 1.0 - omega / std::f64::consts::TAU;
-        let ratio = (1.0 - t * t).max(0.0).sqrt();
-        if !(ratio > 0.0) {
-            return 0.0;
-        }
-        let worst = |node: NodeId| -> Option<(f64, f64)> {
-            let n = bvh.node(node)?;
-            let b = n.bound();
-            let d = ((b.centre.as_dvec3() - eye).length() - f64::from(b.radius)).max(0.0);
-            Some((f64::from(n.r_max()), d))
-        };
-        let mut safe = f64::INFINITY;
-        let mut margin = |m: f64| safe = safe.min(m);
-        if !self.over_at_seed {
-            for &node in &self.refined {
-                match worst(node) {
-                    Some((r, d)) => margin(r / ratio - d),
-                    None => margin(0.0),
-                }
-            }
-            // Budgets other than the entry count are not monotone along refinement, so with
-            // one of them the order of refinement must stay the same too: each refined node
-            // ahead of the next (they were taken in order of solid angle).
-            let b = &self.budgets;
-            if b.max_bytes.is_some() || b.max_draw_calls.is_some() || b.max_triangles.is_some() {
-                for pair in self.refined.windows(2) {
-                    match (worst(pair[0]), worst(pair[1])) {
-                        (Some((ra, da)), Some((rb, db))) => margin((ra * db - rb * da) / (ra + rb)),
-                        _ => margin(0.0),
-                    }
-                }
-            }
-            let stopper = self.stopper.and_then(worst);
-            if let Some((rx, dx)) = stopper {
-                margin(rx / ratio - dx);
-                for &node in &self.refined {
-                    if let Some((r, d)) = worst(node) {
-                        margin((r * dx - rx * d) / (r + rx));
-                    }
-                }
-            }
-            for unit in &self.units {
-                let Unit::Node(node) = *unit else { continue };
-                if Some(node) == self.stopper {
-                    continue;
-                }
-                let Some((r, d)) = worst(node) else {
-                    margin(0.0);
-                    continue;
-                };
-                let below = d - r / ratio;
-                match stopper {
-                    Some((rx, dx)) => margin(below.max((rx * d - r * dx) / (rx + r))),
-                    None => margin(below),
-                }
-            }
-        }
-        for &o in &self.pending {
-            if let Some(o) = bvh.object(o) {
-                let sphere = o.sphere();
-                let d = (sphere.centre.as_dvec3() - eye).length();
-                margin((d - f64::from(sphere.radius) / ratio).abs());
-            }
-        }
-        // Half of it, less a millimetre: the planner works in f32.
-        (0.5 * safe - 1e-3).max(0.0)
-    }
-
     /// What stands for `node` in the cut: its aggregate if the manifest has one, else its
     /// children (a leaf's objects), recursively.
     fn expand(&self, node: NodeId, out: &mut Vec<Unit>) {
@@ -582,7 +574,34 @@ impl<'a> Planner<'a> {
     }
 
     fn finish(self, stopped_by: Option<StoppedBy>) -> Plan {
-        let safe_radius = self.safe_radius();
+        let b = &self.budgets;
+        let decisions = Decisions {
+            min_solid_angle: self.min_solid_angle,
+            refined: self.refined.clone(),
+            frontier: self
+                .units
+                .iter()
+                .filter_map(|u| match *u {
+                    Unit::Node(n) if Some(n) != self.stopper => Some(n),
+                    _ => None,
+                })
+                .collect(),
+            stopper: self.stopper,
+            over_at_seed: self.over_at_seed,
+            ordered: b.max_bytes.is_some()
+                || b.max_draw_calls.is_some()
+                || b.max_triangles.is_some(),
+            pending: self
+                .pending
+                .iter()
+                .filter_map(|&o| {
+                    let s = self.served.tree.bvh.object(o)?.sphere();
+                    let seen = solid_angle(s.radius, (s.centre - self.eye).length())
+                        >= self.min_solid_angle;
+                    Some((o, seen))
+                })
+                .collect(),
+        };
         let tree = self.served.tree;
         let published = self.served.published;
         let mut items = Vec::with_capacity(self.units.len());
@@ -659,8 +678,7 @@ impl<'a> Planner<'a> {
             items,
             stopped_by,
             missing_models: missing.get(),
-            eye: self.eye.as_dvec3().to_array(),
-            safe_radius,
+            decisions,
         }
     }
 }

@@ -385,18 +385,23 @@ async fn write(
             continue;
         };
         shared.planned.store(view_id, Ordering::SeqCst);
-        // Within the held plan's safe radius, with the world and the rest of the view as they
-        // were, planning again would give the same cut: nothing to do.
+        // With the world and the rest of the view as they were, a plan whose decisions hold
+        // at the new eye is the plan planning again would make: nothing to send.
         if let (false, false, Some(h), Some(v)) = (reset, world_changed, &held, &held_view) {
-            let moved = (0..3)
-                .map(|i| (view.eye[i] - h.eye[i]).powi(2))
-                .sum::<f64>()
-                .sqrt();
             let same_rest = v.min_solid_angle == view.min_solid_angle
                 && v.pixel_solid_angle == view.pixel_solid_angle
                 && v.budgets == view.budgets;
-            if same_rest && moved < h.safe_radius {
-                metrics::counter!("horizon_stream_within_safe_radius_total").increment(1);
+            let holds = same_rest
+                && state
+                    .world()
+                    .with_served(|served| {
+                        served.tree.generation == h.generation
+                            && served.published == h.published
+                            && h.decisions.hold_at(served.tree, view.eye)
+                    })
+                    .unwrap_or(false);
+            if holds {
+                metrics::counter!("horizon_stream_decisions_held_total").increment(1);
                 continue;
             }
         }
