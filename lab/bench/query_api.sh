@@ -1,0 +1,81 @@
+#!/usr/bin/env bash
+# The query API under load (DESIGN.md, "Service contract (v1)": /v1/cut and /v1/stream), on
+# built worlds (`horizon-lab gen world city|city9 DIR --seed 1` then `horizon build DIR`):
+#   1. standing queries on the city: `horizon-lab load` at 10 Hz per viewer, for a range of
+#      viewer counts, without mutations and with 5 mutations/s (the rebuild worker on);
+#   2. `GET /v1/cut` on city9 under `horizon-lab bench-cut` at 500 requests/s;
+#   3. a 60 s `horizon-client walk` at street level along one of the city's roads, at
+#      10 Mbit/s and unlimited.
+# Server and load share this machine. Each JSON report goes to OUT/; the city is copied
+# first, since the mutations change it.
+#
+#   cargo build --release -p horizon-server && cargo build --release -p horizon-lab \
+#     && cargo build --release -p horizon-client
+#   bash lab/bench/query_api.sh /tmp/city /tmp/city9 lab/results/query_api
+set -euo pipefail
+CITY=${1:?a built city}
+CITY9=${2:?a built city9}
+OUT=${3:-lab/results/query_api}
+VIEWERS=${VIEWERS:-"10 25 50 100 200"}
+MUTATING=${MUTATING:-"5 10 25 50 1000"}
+SECONDS_EACH=${SECONDS_EACH:-20}
+H=target/release/horizon
+L=target/release/horizon-lab
+C=target/release/horizon-client
+mkdir -p "$OUT"
+work=$(mktemp -d)
+pid=
+cleanup() {
+  if [ -n "$pid" ]; then kill "$pid" 2>/dev/null || true; wait "$pid" 2>/dev/null || true; fi
+  rm -rf "$work"
+}
+trap cleanup EXIT
+
+serve() { # DIR: starts `horizon serve`, sets $pid and $url
+  "$H" serve "$1" --listen 127.0.0.1:0 > "$work/serve.out" 2> "$work/serve.log" &
+  pid=$!
+  for _ in $(seq 600); do
+    if grep -q "^listening on " "$work/serve.out" 2>/dev/null; then break; fi
+    sleep 0.2
+  done
+  url=$(sed -n 's/^listening on //p' "$work/serve.out" | head -1)
+  [ -n "$url" ] || { echo "horizon serve did not start" >&2; cat "$work/serve.log" >&2; exit 1; }
+  curl -sf "$url/v1/world" > /dev/null
+}
+stop() {
+  kill "$pid"; wait "$pid" 2>/dev/null || true; pid=
+}
+
+echo "copying $CITY" >&2
+cp -r "$CITY" "$work/city"
+rm -f "$work/city/world.lock"
+token=$("$H" token create "$work/city" --user loadbot)
+
+serve "$work/city"
+for n in $VIEWERS; do
+  echo "load: $n viewers" >&2
+  "$L" load "$url" --viewers "$n" --hz 10 --duration "$SECONDS_EACH" --pid "$pid" --json \
+    > "$OUT/load_${n}.json"
+done
+for n in $MUTATING; do
+  echo "load: $n viewers, 5 mutations/s" >&2
+  "$L" load "$url" --viewers "$n" --hz 10 --duration "$SECONDS_EACH" --mutations 5 \
+    --token "$token" --pid "$pid" --json > "$OUT/load_${n}_mutating.json"
+done
+
+# A walk along the road at z = 12 * 70 + 5, 2 m up.
+echo '[[20, 2, 845], [1600, 2, 845]]' > "$work/road.json"
+for bw in 1250000 0; do
+  echo "walk: bandwidth $bw" >&2
+  extra=()
+  if [ "$bw" != 0 ]; then extra=(--bandwidth "$bw"); fi
+  "$C" walk "$url" --path "$work/road.json" --duration 60 "${extra[@]}" --json \
+    > "$OUT/walk_${bw}.json"
+done
+stop
+
+serve "$CITY9"
+echo "bench-cut on city9" >&2
+"$L" bench-cut "$url" --rate 500 --seconds 30 > "$OUT/cut_city9.json"
+stop
+echo "wrote $OUT" >&2
