@@ -3,7 +3,7 @@
 # built worlds (`horizon-lab gen world city|city9 DIR --seed 1` then `horizon build DIR`):
 #   1. standing queries on the city: `horizon-lab load` at 10 Hz per viewer, for a range of
 #      viewer counts, without mutations and with 5 mutations/s (the rebuild worker on);
-#   2. `GET /v1/cut` on city9 under `horizon-lab bench-cut` at 500 requests/s;
+#   2. `GET /v1/cut` on city9 under `horizon-lab bench-cut` at 50 to 500 requests/s;
 #   3. a 60 s `horizon-client walk` at street level along one of the city's roads, at
 #      10 Mbit/s and unlimited.
 # Server and load share this machine. Each JSON report goes to OUT/; the city is copied
@@ -75,7 +75,9 @@ done
 stop
 
 serve "$CITY9"
-echo "bench-cut on city9" >&2
-"$L" bench-cut "$url" --rate 500 --seconds 30 > "$OUT/cut_city9.json"
+for rate in 50 100 150 500; do
+  echo "bench-cut on city9 at $rate/s" >&2
+  "$L" bench-cut "$url" --rate "$rate" --seconds 30 > "$OUT/cut_city9_${rate}.json"
+done
 stop
 echo "wrote $OUT" >&2
