@@ -991,3 +991,27 @@ async fn where_a_plans_decisions_hold_planning_again_gives_the_same_cut() {
         "held {held}, changed {changed}, missed {missed}"
     );
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn streams_are_closed_with_1001_when_the_server_stops() {
+    let (_dir, world, _) = world("shutdown");
+    let mut server = serve(
+        &world,
+        Config {
+            rebuild: false,
+            ..Config::default()
+        },
+    )
+    .await;
+    let mut ws = connect(&server).await;
+    send(&mut ws, view_message(1, &View::at([0.0, 2.0, 0.0]))).await;
+    assert!(matches!(
+        next(&mut ws).await,
+        Ok(ServerMessage::Reset { .. })
+    ));
+    let _ = server.stop.take().unwrap().send(());
+    assert_eq!(
+        next(&mut ws).await.unwrap_err(),
+        (1001, "overloaded".into())
+    );
+}

@@ -128,6 +128,8 @@ struct Inner {
     models: cut::ModelTable,
     /// Counts commits and publishes: streams wait on it.
     changes: tokio::sync::watch::Sender<u64>,
+    /// Set when the server shuts down: streams close with 1001.
+    closing: tokio::sync::watch::Sender<bool>,
     /// Open streams, in all and by address.
     streams: stream::Connections,
 }
@@ -151,6 +153,7 @@ impl AppState {
                 metrics: prometheus(),
                 models,
                 changes,
+                closing: tokio::sync::watch::channel(false).0,
                 streams: stream::Connections::default(),
             }),
         }
@@ -204,6 +207,10 @@ impl AppState {
     }
 
     /// A receiver that sees every commit and publish from now on.
+    fn closing(&self) -> tokio::sync::watch::Receiver<bool> {
+        self.inner.closing.subscribe()
+    }
+
     fn changes(&self) -> tokio::sync::watch::Receiver<u64> {
         self.inner.changes.subscribe()
     }
@@ -357,10 +364,21 @@ pub async fn run(
         .config()
         .rebuild
         .then(|| Rebuilder::spawn(state.world().clone(), state.config().clone()));
+    let closing = state.inner.closing.clone();
+    let streams = state.clone();
     let app = app(state).into_make_service_with_connect_info::<std::net::SocketAddr>();
     let served = axum::serve(listener, app)
-        .with_graceful_shutdown(shutdown)
+        .with_graceful_shutdown(async move {
+            shutdown.await;
+            // Open streams say goodbye (1001) rather than being cut off.
+            closing.send_replace(true);
+        })
         .await;
+    // Give the streams a moment to send their close frames.
+    let deadline = Instant::now() + Duration::from_secs(1);
+    while streams.streams().open() > 0 && Instant::now() < deadline {
+        tokio::time::sleep(Duration::from_millis(10)).await;
+    }
     if let Some(r) = rebuilder {
         tokio::task::spawn_blocking(move || r.stop())
             .await

@@ -40,6 +40,8 @@ use super::{AppState, StreamLimits};
 const TOO_BIG: u16 = 1009;
 /// Close code: a policy was broken (rate, connection limits, a slow consumer).
 const POLICY: u16 = 1008;
+/// Close code: the server is going away (shutting down).
+const GOING_AWAY: u16 = 1001;
 
 /// How long a closing connection waits for the client's close reply.
 const LINGER: std::time::Duration = std::time::Duration::from_secs(1);
@@ -49,6 +51,13 @@ const LINGER: std::time::Duration = std::time::Duration::from_secs(1);
 pub struct Connections {
     total: AtomicUsize,
     by_ip: Mutex<HashMap<IpAddr, usize>>,
+}
+
+impl Connections {
+    /// Streams open now.
+    pub fn open(&self) -> usize {
+        self.total.load(Ordering::SeqCst)
+    }
 }
 
 /// One open stream's place in [`Connections`], given back when dropped.
@@ -332,6 +341,7 @@ async fn write(
 ) {
     let limits = state.config().stream;
     let mut changes = state.changes();
+    let mut closing = state.closing();
     let mut held: Option<Plan> = None;
     let mut seq = 0u64;
     let mut reset = true;
@@ -359,6 +369,10 @@ async fn write(
                 }
                 r = acked.changed() => {
                     if r.is_err() { return; }
+                }
+                _ = closing.changed() => {
+                    let _ = sink.send(close(GOING_AWAY, ErrorCode::Overloaded, "the server is shutting down")).await;
+                    return;
                 }
                 c = controls.recv() => match c {
                     None => return,
@@ -512,7 +526,8 @@ async fn send(
     }
 }
 
-/// A close frame whose reason is the error code (the message goes to the log).
+/// A close frame whose reason is the error code (the message goes to the log); a shutdown
+/// (1001) says `overloaded`, the code of "try again later".
 fn close(code: u16, error: ErrorCode, message: &str) -> Message {
     tracing::info!(code, ?error, message, "closing a stream");
     let reason = serde_json::to_value(error)
