@@ -42,7 +42,7 @@ use horizon_protocol::{
 use horizon_world::{Served, World, WorldError};
 
 /// Plans the cut for `view` over what `served` holds at `generation`: see the module docs.
-pub fn plan(served: &Served<'_>, models: &ModelTable, view: &View) -> Plan {
+pub fn plan(served: &Served<'_>, models: &AssetTable, view: &View) -> Plan {
     let mut planner = Planner::new(served, models, view);
     planner.seed();
     let stopped_by = planner.refine();
@@ -63,11 +63,11 @@ pub struct Plan {
     pub published: u64,
     /// Objects at `generation`.
     pub objects: u64,
-    /// The entries, largest solid angle first.
+    /// The entries, in no particular order ([`Plan::entries`] sorts them).
     pub items: Vec<Planned>,
     /// The budget that stopped refinement.
     pub stopped_by: Option<StoppedBy>,
-    /// Objects left out because their model is not in the [`ModelTable`] yet (refresh it
+    /// Objects left out because their model is not in the [`AssetTable`] yet (refresh it
     /// and plan again).
     pub missing_models: usize,
     /// What refinement decided, to tell whether a new eye would decide the same.
@@ -223,16 +223,53 @@ pub struct ModelAsset {
     pub draw_calls: u64,
 }
 
-/// Every model's [`ModelAsset`] by model number, read from the world when a number is new.
+/// What the planner needs of a node's published aggregate.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct NodeAsset {
+    /// GLB bytes.
+    pub bytes: u64,
+    /// Expanded triangles.
+    pub triangles: u64,
+    /// Draw calls: one per submesh.
+    pub draw_calls: u64,
+    /// The first 64 bits of the GLB's hash.
+    pub content: u64,
+}
+
+/// A manifest's aggregates by node id, for lookups on the planner's hot path.
+pub type NodeAssets = Vec<Option<NodeAsset>>;
+
+/// What cuts cost: every model's [`ModelAsset`] by model number (read from the world when a
+/// number is new), and the published manifest's [`NodeAssets`] (made once per manifest).
 #[derive(Debug, Default)]
-pub struct ModelTable {
+pub struct AssetTable {
     by_number: RwLock<Arc<Models>>,
+    nodes: std::sync::Mutex<Option<(Arc<AggregateManifest>, Arc<NodeAssets>)>>,
 }
 
 /// The model table at one moment: [`ModelAsset`]s by model number.
 pub type Models = Vec<Option<Arc<ModelAsset>>>;
 
-impl ModelTable {
+impl AssetTable {
+    /// `manifest`'s aggregates by node id (made on its first use, then kept until the next
+    /// manifest).
+    fn node_assets(&self, manifest: Option<&Arc<AggregateManifest>>) -> Arc<NodeAssets> {
+        let Some(manifest) = manifest else {
+            return Arc::default();
+        };
+        let Ok(mut cached) = self.nodes.lock() else {
+            return Arc::new(index_nodes(manifest));
+        };
+        if let Some((m, nodes)) = cached.as_ref() {
+            if Arc::ptr_eq(m, manifest) {
+                return nodes.clone();
+            }
+        }
+        let nodes = Arc::new(index_nodes(manifest));
+        *cached = Some((manifest.clone(), nodes.clone()));
+        nodes
+    }
+
     /// Makes sure every model number up to those `world` holds is known.
     pub fn refresh(&self, world: &World) -> Result<(), WorldError> {
         let rows = world.all_models()?;
@@ -262,6 +299,25 @@ impl ModelTable {
     fn snapshot(&self) -> Arc<Models> {
         self.by_number.read().map(|t| t.clone()).unwrap_or_default()
     }
+}
+
+fn index_nodes(manifest: &AggregateManifest) -> NodeAssets {
+    let len = manifest
+        .nodes
+        .keys()
+        .next_back()
+        .map_or(0, |&n| n as usize + 1);
+    let mut nodes = vec![None; len];
+    for (&n, entry) in &manifest.nodes {
+        let stats = &entry.stats;
+        nodes[n as usize] = Some(NodeAsset {
+            bytes: stats.bytes as u64,
+            triangles: stats.triangles_out,
+            draw_calls: stats.submeshes.max(1) as u64,
+            content: content_bits(&entry.glb),
+        });
+    }
+    nodes
 }
 
 /// A unit the planner puts in or takes out of the cut.
@@ -313,7 +369,7 @@ impl PartialOrd for Candidate {
 
 struct Planner<'a> {
     served: &'a Served<'a>,
-    manifest: Option<&'a AggregateManifest>,
+    nodes: Arc<NodeAssets>,
     models: Arc<Models>,
     eye: Vec3,
     min_solid_angle: f32,
@@ -335,7 +391,7 @@ struct Planner<'a> {
 }
 
 impl<'a> Planner<'a> {
-    fn new(served: &'a Served<'a>, models: &'a ModelTable, view: &View) -> Self {
+    fn new(served: &'a Served<'a>, models: &'a AssetTable, view: &View) -> Self {
         let tree = served.tree;
         let mut pending_under: HashMap<NodeId, Vec<ObjectId>> = HashMap::new();
         let mut pending = HashSet::new();
@@ -354,14 +410,21 @@ impl<'a> Planner<'a> {
         budgets.max_entries.get_or_insert(DEFAULT_MAX_ENTRIES);
         Self {
             served,
-            manifest: served.manifest.as_deref(),
+            nodes: models.node_assets(served.manifest.as_ref()),
             models: models.snapshot(),
             eye: Vec3::new(view.eye[0] as f32, view.eye[1] as f32, view.eye[2] as f32),
             min_solid_angle: view.min_solid_angle as f32,
             budgets,
             pending_under,
             pending,
-            units: HashSet::new(),
+            // About the cut's size, so that the set does not grow step by step.
+            units: HashSet::with_capacity(
+                budgets
+                    .max_entries
+                    .map_or(4096, |n| n.min(1 << 16) as usize)
+                    * 5
+                    / 4,
+            ),
             heap: BinaryHeap::new(),
             assets: HashMap::new(),
             totals: Totals::default(),
@@ -442,24 +505,24 @@ impl<'a> Planner<'a> {
         }
     }
 
-    fn aggregate(&self, node: NodeId) -> Option<&'a horizon_aggregate::AggregateEntry> {
-        self.manifest?.nodes.get(&node.0)
+    fn aggregate(&self, node: NodeId) -> Option<&NodeAsset> {
+        self.nodes.get(node.0 as usize).and_then(Option::as_ref)
     }
 
     /// The pending objects a node's aggregate leaves to entries of their own.
     fn extracted(&self, node: NodeId) -> impl Iterator<Item = ObjectId> + '_ {
         let bvh = &self.served.tree.bvh;
-        self.pending_under
-            .get(&node)
-            .into_iter()
-            .flatten()
-            .copied()
-            .filter(move |&o| {
-                bvh.object(o).is_some_and(|o| {
-                    let s = o.sphere();
-                    solid_angle(s.radius, (s.centre - self.eye).length()) >= self.min_solid_angle
-                })
+        let under = if self.pending_under.is_empty() {
+            None
+        } else {
+            self.pending_under.get(&node)
+        };
+        under.into_iter().flatten().copied().filter(move |&o| {
+            bvh.object(o).is_some_and(|o| {
+                let s = o.sphere();
+                solid_angle(s.radius, (s.centre - self.eye).length()) >= self.min_solid_angle
             })
+        })
     }
 
     /// Adds (`sign` 1) or takes out (-1) a unit and what it costs.
@@ -483,13 +546,12 @@ impl<'a> Planner<'a> {
                     .node(node)
                     .map_or(0, |n| u64::from(n.count()));
                 if count > extracted.len() as u64 {
-                    if let Some(entry) = self.aggregate(node) {
-                        let stats = &entry.stats;
+                    if let Some(&a) = self.aggregate(node) {
                         self.charge(
                             AssetKey::Node(node),
-                            stats.bytes as u64,
-                            stats.submeshes.max(1) as u64,
-                            stats.triangles_out,
+                            a.bytes,
+                            a.draw_calls,
+                            a.triangles,
                             sign,
                         );
                     }
@@ -652,7 +714,7 @@ impl<'a> Planner<'a> {
                     items.push(Planned {
                         key: Key::Aggregate {
                             node: node.0,
-                            content: content_bits(&entry.glb),
+                            content: entry.content,
                         },
                         what: Drawn::Aggregate { node },
                         covers,
@@ -664,11 +726,6 @@ impl<'a> Planner<'a> {
                 }
             }
         }
-        items.sort_by(|a, b| {
-            b.solid_angle
-                .total_cmp(&a.solid_angle)
-                .then_with(|| a.key.cmp(&b.key))
-        });
         Plan {
             manifest: self.served.manifest.clone(),
             models: self.models.clone(),
@@ -725,9 +782,15 @@ fn matrix_of(t: &Affine3A) -> [f32; 12] {
 }
 
 impl Plan {
-    /// The wire entries.
+    /// The wire entries, largest solid angle first (ties by id).
     pub fn entries(&self) -> Vec<Entry> {
-        self.items.iter().map(|p| self.entry(p)).collect()
+        let mut order: Vec<&Planned> = self.items.iter().collect();
+        order.sort_unstable_by(|a, b| {
+            b.solid_angle
+                .total_cmp(&a.solid_angle)
+                .then_with(|| a.key.cmp(&b.key))
+        });
+        order.into_iter().map(|p| self.entry(p)).collect()
     }
 
     /// The aggregate a planned entry draws, if it is one.
@@ -802,8 +865,10 @@ impl Plan {
     /// why, then entries to add, each naming the removed entries whose objects it now
     /// draws. `served` is the tree this plan was made on; ancestry is read from it.
     pub fn diff(&self, before: &Plan, served: &Served<'_>) -> (Vec<Addition>, Vec<Removal>) {
-        let now: HashMap<Key, &Planned> = self.items.iter().map(|p| (p.key, p)).collect();
-        let old: HashMap<Key, &Planned> = before.items.iter().map(|p| (p.key, p)).collect();
+        let mut now: HashMap<Key, &Planned> = HashMap::with_capacity(self.items.len());
+        now.extend(self.items.iter().map(|p| (p.key, p)));
+        let mut old: HashMap<Key, &Planned> = HashMap::with_capacity(before.items.len());
+        old.extend(before.items.iter().map(|p| (p.key, p)));
         let gone: Vec<&Planned> = before
             .items
             .iter()

@@ -125,7 +125,7 @@ struct Inner {
     config: Config,
     metrics: PrometheusHandle,
     /// Every model's asset, for cuts.
-    models: cut::ModelTable,
+    models: cut::AssetTable,
     /// Counts commits and publishes: streams wait on it.
     changes: tokio::sync::watch::Sender<u64>,
     /// Set when the server shuts down: streams close with 1001.
@@ -137,7 +137,7 @@ struct Inner {
 impl AppState {
     /// The state of a service over `world`.
     pub fn new(world: Arc<World>, config: Config) -> Self {
-        let models = cut::ModelTable::default();
+        let models = cut::AssetTable::default();
         if let Err(e) = models.refresh(&world) {
             tracing::warn!(error = %e, "the model table is read on the first cut instead");
         }
