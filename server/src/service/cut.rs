@@ -51,7 +51,7 @@ pub fn plan(served: &Served<'_>, models: &AssetTable, view: &View) -> Plan {
 
 /// A planned cut: what [`plan`] chose, with just enough to compare two plans; the wire
 /// entries are made from it by [`Plan::entries`] or [`Plan::entry`].
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug)]
 pub struct Plan {
     /// The manifest whose aggregates it names.
     pub manifest: Option<Arc<AggregateManifest>>,
@@ -70,6 +70,8 @@ pub struct Plan {
     /// Objects left out because their model is not in the [`AssetTable`] yet (refresh it
     /// and plan again).
     pub missing_models: usize,
+    /// The view it was planned for.
+    pub view: View,
     /// What refinement decided, to tell whether a new eye would decide the same.
     pub decisions: Decisions,
 }
@@ -100,22 +102,16 @@ impl Decisions {
     /// `min_solid_angle`. Ties count as changes (the planner breaks them by node id), so
     /// "true" is exact: it evaluates the planner's own solid angles.
     pub fn hold_at(&self, tree: &horizon_world::Tree, eye: [f64; 3]) -> bool {
-        let eye = Vec3::new(eye[0] as f32, eye[1] as f32, eye[2] as f32);
+        let eye = eye_of(eye);
         let bvh = &tree.bvh;
-        let worst = |node: NodeId| {
-            bvh.node(node).map(|n| {
-                let b = n.bound();
-                worst_case_solid_angle(eye, b.centre, b.radius, n.r_max())
-            })
-        };
+        let worst = |node: NodeId| node_worst_case(bvh, node, eye);
         let min = self.min_solid_angle;
-        for &(o, seen) in &self.pending {
-            let Some(s) = bvh.object(o).map(|o| o.sphere()) else {
-                return false;
-            };
-            if (solid_angle(s.radius, (s.centre - eye).length()) >= min) != seen {
-                return false;
-            }
+        if self
+            .pending
+            .iter()
+            .any(|&(o, seen)| subtends(bvh, o, eye, min) != Some(seen))
+        {
+            return false;
         }
         if self.over_at_seed {
             return true;
@@ -148,6 +144,26 @@ impl Decisions {
             .iter()
             .all(|&node| worst(node).is_some_and(|a| a < bar))
     }
+}
+
+/// A node's worst case seen from `eye`: an object of the node's `r_max` at its bound's
+/// nearest point (`DESIGN.md`, "Cut test"). The planner and [`Decisions::hold_at`] both
+/// use it, so that their decisions agree to the bit.
+fn node_worst_case(bvh: &horizon_bvh::Bvh, node: NodeId, eye: Vec3) -> Option<f32> {
+    let n = bvh.node(node)?;
+    let b = n.bound();
+    Some(worst_case_solid_angle(eye, b.centre, b.radius, n.r_max()))
+}
+
+/// Whether an object subtends `min` from `eye` (a pending object is then its own entry).
+fn subtends(bvh: &horizon_bvh::Bvh, object: ObjectId, eye: Vec3, min: f32) -> Option<bool> {
+    let s = bvh.object(object)?.sphere();
+    Some(solid_angle(s.radius, (s.centre - eye).length()) >= min)
+}
+
+/// A view's eye in the tree's precision.
+fn eye_of(eye: [f64; 3]) -> Vec3 {
+    Vec3::new(eye[0] as f32, eye[1] as f32, eye[2] as f32)
 }
 
 /// One planned entry.
@@ -189,25 +205,18 @@ pub enum Key {
     },
 }
 
-/// What a planned entry draws.
+/// What a planned entry draws, besides what its [`Key`] names.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Drawn {
-    /// A world object: its world id, model and placement.
+    /// A world object's model and placement.
     Object {
-        /// World id.
-        object: u64,
-        /// The tree's id of it.
-        tree_id: ObjectId,
         /// The model's number (its asset is in the plan's model table).
         model: u64,
         /// Model to world.
         transform: Affine3A,
     },
-    /// A node's published aggregate (in the plan's manifest).
-    Aggregate {
-        /// The node.
-        node: NodeId,
-    },
+    /// The node's published aggregate (in the plan's manifest).
+    Aggregate,
 }
 
 /// What the cut needs of a model: its stored GLB and what drawing it costs.
@@ -309,15 +318,22 @@ fn index_nodes(manifest: &AggregateManifest) -> NodeAssets {
         .map_or(0, |&n| n as usize + 1);
     let mut nodes = vec![None; len];
     for (&n, entry) in &manifest.nodes {
+        nodes[n as usize] = Some(NodeAsset::of(entry));
+    }
+    nodes
+}
+
+impl NodeAsset {
+    /// What drawing a published aggregate costs.
+    fn of(entry: &horizon_aggregate::AggregateEntry) -> Self {
         let stats = &entry.stats;
-        nodes[n as usize] = Some(NodeAsset {
+        Self {
             bytes: stats.bytes as u64,
             triangles: stats.triangles_out,
             draw_calls: stats.submeshes.max(1) as u64,
             content: content_bits(&entry.glb),
-        });
+        }
     }
-    nodes
 }
 
 /// A unit the planner puts in or takes out of the cut.
@@ -371,6 +387,7 @@ struct Planner<'a> {
     served: &'a Served<'a>,
     nodes: Arc<NodeAssets>,
     models: Arc<Models>,
+    view: View,
     eye: Vec3,
     min_solid_angle: f32,
     budgets: Budgets,
@@ -412,7 +429,8 @@ impl<'a> Planner<'a> {
             served,
             nodes: models.node_assets(served.manifest.as_ref()),
             models: models.snapshot(),
-            eye: Vec3::new(view.eye[0] as f32, view.eye[1] as f32, view.eye[2] as f32),
+            view: *view,
+            eye: eye_of(view.eye),
             min_solid_angle: view.min_solid_angle as f32,
             budgets,
             pending_under,
@@ -459,14 +477,15 @@ impl<'a> Planner<'a> {
                 return None;
             }
             let node = top.node;
-            let Some(n) = self.served.tree.bvh.node(node) else {
+            let tree: &'a horizon_world::Tree = self.served.tree;
+            let Some(n) = tree.bvh.node(node) else {
                 continue;
             };
             let mut added = Vec::new();
             if n.is_leaf() {
                 added.extend(n.objects().map(Unit::Object));
             } else {
-                for child in n.child_nodes().collect::<Vec<_>>() {
+                for child in n.child_nodes() {
                     self.expand(child, &mut added);
                 }
             }
@@ -517,12 +536,11 @@ impl<'a> Planner<'a> {
         } else {
             self.pending_under.get(&node)
         };
-        under.into_iter().flatten().copied().filter(move |&o| {
-            bvh.object(o).is_some_and(|o| {
-                let s = o.sphere();
-                solid_angle(s.radius, (s.centre - self.eye).length()) >= self.min_solid_angle
-            })
-        })
+        under
+            .into_iter()
+            .flatten()
+            .copied()
+            .filter(move |&o| subtends(bvh, o, self.eye, self.min_solid_angle) == Some(true))
     }
 
     /// Adds (`sign` 1) or takes out (-1) a unit and what it costs.
@@ -625,21 +643,14 @@ impl<'a> Planner<'a> {
     }
 
     fn worst_case(&self, node: NodeId) -> Option<f32> {
-        let n = self.served.tree.bvh.node(node)?;
-        let bound = n.bound();
-        Some(worst_case_solid_angle(
-            self.eye,
-            bound.centre,
-            bound.radius,
-            n.r_max(),
-        ))
+        node_worst_case(&self.served.tree.bvh, node, self.eye)
     }
 
-    fn finish(self, stopped_by: Option<StoppedBy>) -> Plan {
+    fn finish(mut self, stopped_by: Option<StoppedBy>) -> Plan {
         let b = &self.budgets;
         let decisions = Decisions {
             min_solid_angle: self.min_solid_angle,
-            refined: self.refined.clone(),
+            refined: std::mem::take(&mut self.refined),
             frontier: self
                 .units
                 .iter()
@@ -657,9 +668,7 @@ impl<'a> Planner<'a> {
                 .pending
                 .iter()
                 .filter_map(|&o| {
-                    let s = self.served.tree.bvh.object(o)?.sphere();
-                    let seen = solid_angle(s.radius, (s.centre - self.eye).length())
-                        >= self.min_solid_angle;
+                    let seen = subtends(&self.served.tree.bvh, o, self.eye, self.min_solid_angle)?;
                     Some((o, seen))
                 })
                 .collect(),
@@ -683,8 +692,6 @@ impl<'a> Planner<'a> {
                     placed: tree.placed_at(o),
                 },
                 what: Drawn::Object {
-                    object,
-                    tree_id: o,
                     model,
                     transform: r.transform(),
                 },
@@ -716,7 +723,7 @@ impl<'a> Planner<'a> {
                             node: node.0,
                             content: entry.content,
                         },
-                        what: Drawn::Aggregate { node },
+                        what: Drawn::Aggregate,
                         covers,
                         pending: false,
                         center: sphere.centre.to_array(),
@@ -735,6 +742,7 @@ impl<'a> Planner<'a> {
             items,
             stopped_by,
             missing_models: missing.get(),
+            view: self.view,
             decisions,
         }
     }
@@ -750,16 +758,16 @@ impl Planned {
     }
 
     fn node(&self) -> Option<NodeId> {
-        match self.what {
-            Drawn::Aggregate { node } => Some(node),
-            Drawn::Object { .. } => None,
+        match self.key {
+            Key::Aggregate { node, .. } => Some(NodeId(node)),
+            Key::Object { .. } => None,
         }
     }
 
     fn object(&self) -> Option<u64> {
-        match self.what {
-            Drawn::Object { object, .. } => Some(object),
-            Drawn::Aggregate { .. } => None,
+        match self.key {
+            Key::Object { object, .. } => Some(object),
+            Key::Aggregate { .. } => None,
         }
     }
 }
@@ -827,15 +835,15 @@ impl Plan {
                     AssetRole::Model,
                 )
             }
-            Drawn::Aggregate { .. } => {
+            Drawn::Aggregate => {
                 let a = self.aggregate(p);
-                let stats = a.map(|a| &a.stats);
+                let cost = a.map(NodeAsset::of);
                 (
                     EntryKind::Aggregate,
                     a.map_or(String::new(), |a| a.glb.clone()),
-                    stats.map_or(0, |s| s.bytes as u64),
-                    stats.map_or(0, |s| s.triangles_out),
-                    stats.map_or(1, |s| s.submeshes.max(1) as u64),
+                    cost.map_or(0, |c| c.bytes),
+                    cost.map_or(0, |c| c.triangles),
+                    cost.map_or(1, |c| c.draw_calls),
                     matrix_of(&Affine3A::IDENTITY),
                     AssetRole::Mesh,
                 )
@@ -886,13 +894,10 @@ impl Plan {
         let bvh = &tree.bvh;
         // Where each removed entry sat in the tree now: its node, or its object's leaf.
         let place_of = |p: &Planned| -> Option<NodeId> {
-            match p.what {
-                Drawn::Aggregate { node } => Some(node),
-                Drawn::Object { object, .. } => tree
-                    .tree_id(object)
-                    .and_then(|o| bvh.object(o))
-                    .map(|o| o.leaf()),
-            }
+            p.node().or_else(|| {
+                let o = tree.tree_id(p.object()?)?;
+                bvh.object(o).map(|o| o.leaf())
+            })
         };
         let ancestors = |start: Option<NodeId>| {
             std::iter::successors(start, move |&n| bvh.node(n).and_then(|r| r.parent()))
@@ -940,9 +945,9 @@ impl Plan {
             removals.push(Removal { id, reason });
         }
         for (i, p) in fresh.iter().enumerate() {
-            let start = match p.what {
-                Drawn::Aggregate { node } => bvh.node(node).and_then(|r| r.parent()),
-                Drawn::Object { .. } => place_of(p),
+            let start = match p.node() {
+                Some(node) => bvh.node(node).and_then(|r| r.parent()),
+                None => place_of(p),
             };
             for a in ancestors(start) {
                 if let Some(&g) = gone_nodes.get(&a) {

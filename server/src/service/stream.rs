@@ -348,8 +348,6 @@ async fn write(
     // Whether the view or the world changed since the last plan, and the world alone.
     let mut stale = false;
     let mut world_changed = false;
-    // The view the held plan was made for.
-    let mut held_view: Option<View> = None;
     loop {
         let waiting_for_ack = {
             let a = shared.acked.load(Ordering::SeqCst);
@@ -401,10 +399,11 @@ async fn write(
         shared.planned.store(view_id, Ordering::SeqCst);
         // With the world and the rest of the view as they were, a plan whose decisions hold
         // at the new eye is the plan planning again would make: nothing to send.
-        if let (false, false, Some(h), Some(v)) = (reset, world_changed, &held, &held_view) {
-            let same_rest = v.min_solid_angle == view.min_solid_angle
-                && v.pixel_solid_angle == view.pixel_solid_angle
-                && v.budgets == view.budgets;
+        if let (false, false, Some(h)) = (reset, world_changed, &held) {
+            let same_rest = View {
+                eye: view.eye,
+                ..h.view
+            } == view;
             let holds = same_rest
                 && state
                     .world()
@@ -420,7 +419,6 @@ async fn write(
             }
         }
         world_changed = false;
-        held_view = Some(view);
         let before = held.take();
         let want_reset = reset || before.is_none();
         let planned = {
