@@ -152,14 +152,7 @@ pub fn run(dir: &Path, insert: usize, seed: u64, out: Option<&Path>) -> anyhow::
 
 /// Peak resident set size of this process (Linux `VmHWM`), 0 where unknown.
 pub fn peak_memory_bytes() -> u64 {
-    std::fs::read_to_string("/proc/self/status")
-        .ok()
-        .and_then(|s| {
-            s.lines()
-                .find(|l| l.starts_with("VmHWM:"))
-                .and_then(|l| l.split_whitespace().nth(1)?.parse::<u64>().ok())
-        })
-        .map_or(0, |kb| kb * 1024)
+    crate::load::status_bytes("self", "VmHWM:").unwrap_or(0)
 }
 
 fn bench_markdown(r: &AggregateBench) -> String {

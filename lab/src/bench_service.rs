@@ -618,14 +618,7 @@ impl Server {
 
     /// The server's peak resident set size (Linux `VmHWM`), 0 where unknown.
     fn peak_rss(&self) -> u64 {
-        std::fs::read_to_string(format!("/proc/{}/status", self.child.id()))
-            .ok()
-            .and_then(|s| {
-                s.lines()
-                    .find(|l| l.starts_with("VmHWM:"))
-                    .and_then(|l| l.split_whitespace().nth(1)?.parse::<u64>().ok())
-            })
-            .map_or(0, |kb| kb * 1024)
+        crate::load::status_bytes(&self.child.id().to_string(), "VmHWM:").unwrap_or(0)
     }
 }
 

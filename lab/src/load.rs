@@ -25,33 +25,43 @@ use horizon_server::outln;
 use serde::Serialize;
 use tokio_tungstenite::tungstenite::Message;
 
-/// What `horizon-lab load` takes.
-#[derive(Clone, Debug)]
+/// What `horizon-lab load` takes (its command-line arguments).
+#[derive(Clone, Debug, clap::Args)]
 pub struct Args {
     /// The server, `http://HOST:PORT`.
     pub url: String,
     /// Simulated viewers.
+    #[arg(long, default_value_t = 100)]
     pub viewers: usize,
     /// View updates per second per viewer.
+    #[arg(long, default_value_t = 10.0)]
     pub hz: f64,
-    /// Seconds of load after every viewer has its first cut.
+    /// Seconds measured after every viewer has its first cut.
+    #[arg(long, default_value_t = 30.0)]
     pub duration: f64,
-    /// Mutations per second (needs `token`).
+    /// Mutations per second (places, moves, deletes); needs --token.
+    #[arg(long, default_value_t = 0.0)]
     pub mutations: f64,
     /// Seed of the paths and mutations.
+    #[arg(long, default_value_t = 1)]
     pub seed: u64,
     /// A bearer token for the mutations.
+    #[arg(long)]
     pub token: Option<String>,
-    /// The server's process id, for CPU and memory (default: the `horizon serve` process
-    /// found in `/proc`, if exactly one).
+    /// The server's process id (default: the one `horizon serve` on this machine).
+    #[arg(long)]
     pub pid: Option<u32>,
     /// Walking speed, m/s.
+    #[arg(long, default_value_t = 1.4)]
     pub speed: f64,
-    /// Eye height: `y` of every viewer, metres.
+    /// Eye height (y), metres.
+    #[arg(long, default_value_t = 2.0)]
     pub height: f64,
-    /// The views' `min_solid_angle`.
+    /// The views' min_solid_angle.
+    #[arg(long, default_value_t = horizon_protocol::DEFAULT_MIN_SOLID_ANGLE)]
     pub min_solid_angle: f64,
-    /// The views' `max_entries`.
+    /// The views' max_entries.
+    #[arg(long, default_value_t = horizon_protocol::DEFAULT_MAX_ENTRIES)]
     pub max_entries: u64,
 }
 
@@ -657,10 +667,15 @@ fn cpu_seconds(pid: u32) -> Option<f64> {
 
 /// Resident memory of a process, bytes.
 fn rss(pid: u32) -> Option<u64> {
-    let status = std::fs::read_to_string(format!("/proc/{pid}/status")).ok()?;
-    status
+    status_bytes(&pid.to_string(), "VmRSS:")
+}
+
+/// A size field of `/proc/PROC/status` (`PROC` a process id or `self`), in bytes.
+pub fn status_bytes(process: &str, field: &str) -> Option<u64> {
+    std::fs::read_to_string(format!("/proc/{process}/status"))
+        .ok()?
         .lines()
-        .find(|l| l.starts_with("VmRSS:"))
+        .find(|l| l.starts_with(field))
         .and_then(|l| l.split_whitespace().nth(1)?.parse::<u64>().ok())
         .map(|kb| kb * 1024)
 }

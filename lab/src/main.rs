@@ -189,41 +189,8 @@ enum Command {
     /// on `/v1/stream` while a client mutates the world; camera-update-to-delta latency,
     /// deltas, bytes, coalesced views, errors, and the server's CPU and memory.
     Load {
-        /// The server, `http://HOST:PORT`.
-        url: String,
-        /// Simulated viewers.
-        #[arg(long, default_value_t = 100)]
-        viewers: usize,
-        /// View updates per second per viewer.
-        #[arg(long, default_value_t = 10.0)]
-        hz: f64,
-        /// Seconds measured after every viewer has its first cut.
-        #[arg(long, default_value_t = 30.0)]
-        duration: f64,
-        /// Mutations per second (places, moves, deletes); needs --token.
-        #[arg(long, default_value_t = 0.0)]
-        mutations: f64,
-        /// Seed of the paths and mutations.
-        #[arg(long, default_value_t = 1)]
-        seed: u64,
-        /// A bearer token for the mutations.
-        #[arg(long)]
-        token: Option<String>,
-        /// The server's process id (default: the one `horizon serve` on this machine).
-        #[arg(long)]
-        pid: Option<u32>,
-        /// Walking speed, m/s.
-        #[arg(long, default_value_t = 1.4)]
-        speed: f64,
-        /// Eye height (y), metres.
-        #[arg(long, default_value_t = 2.0)]
-        height: f64,
-        /// The views' min_solid_angle.
-        #[arg(long, default_value_t = DEFAULT_MIN_SOLID_ANGLE)]
-        min_solid_angle: f64,
-        /// The views' max_entries.
-        #[arg(long, default_value_t = DEFAULT_MAX_RESULTS as u64)]
-        max_entries: u64,
+        #[command(flatten)]
+        args: load::Args,
         /// Print JSON instead of text.
         #[arg(long)]
         json: bool,
@@ -387,37 +354,7 @@ fn main() -> ExitCode {
             out,
         } => bench_aggregates::run(&dir, insert, seed, out.as_deref()),
         Command::BenchDescriptors { assets, out } => bench_descriptors::run(&assets, &out),
-        Command::Load {
-            url,
-            viewers,
-            hz,
-            duration,
-            mutations,
-            seed,
-            token,
-            pid,
-            speed,
-            height,
-            min_solid_angle,
-            max_entries,
-            json,
-        } => {
-            let args = load::Args {
-                url,
-                viewers,
-                hz,
-                duration,
-                mutations,
-                seed,
-                token,
-                pid,
-                speed,
-                height,
-                min_solid_angle,
-                max_entries,
-            };
-            load::run(&args).and_then(|r| load::print(&r, json))
-        }
+        Command::Load { args, json } => load::run(&args).and_then(|r| load::print(&r, json)),
         Command::BenchCut {
             url,
             rate,
