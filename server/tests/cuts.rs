@@ -744,6 +744,13 @@ async fn bad_stream_messages_get_errors_and_limits_close() {
     send(&mut bystander, view_message(1, &view)).await;
     let mut held = Held::default();
     held.apply(&next(&mut bystander).await.unwrap());
+    // A plain GET, not a handshake: the contract's JSON error.
+    let r = reqwest::get(format!("{}/v1/stream", server.base))
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 400);
+    let body: serde_json::Value = r.json().await.expect("a JSON error");
+    assert_eq!(body["error"]["code"], "bad_query", "{body}");
     for (bad, code) in [
         ("{", "malformed_json"),
         ("[1, 2]", "bad_query"),

@@ -24,17 +24,18 @@ use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
+use axum::extract::ws::rejection::WebSocketUpgradeRejection;
 use axum::extract::ws::{CloseFrame, Message, WebSocket, WebSocketUpgrade};
 use axum::extract::{ConnectInfo, FromRequestParts, State};
 use axum::http::request::Parts;
-use axum::response::Response;
+use axum::response::{IntoResponse, Response};
 use futures_util::stream::{SplitSink, SplitStream};
 use futures_util::{SinkExt, StreamExt};
-use horizon_protocol::{ClientMessage, ErrorCode, ErrorDetail, ServerMessage, View};
+use horizon_protocol::{ClientMessage, ErrorBody, ErrorCode, ErrorDetail, ServerMessage, View};
 use tokio::sync::{mpsc, watch};
 
 use super::cut::Plan;
-use super::{AppState, StreamLimits};
+use super::{AppError, AppState, StreamLimits};
 
 /// Close code: the message was over the size limit.
 const TOO_BIG: u16 = 1009;
@@ -143,13 +144,27 @@ impl<S: Send + Sync> FromRequestParts<S> for ClientIp {
 #[utoipa::path(get, path = "/v1/stream", tag = "cuts",
     responses(
         (status = 101, description = "Switching to the WebSocket protocol; messages in DESIGN.md"),
-        (status = 400, description = "Not a WebSocket upgrade"),
+        (status = 400, description = "Not a WebSocket upgrade", body = ErrorBody),
     ))]
 pub async fn stream(
     State(state): State<AppState>,
     ClientIp(ip): ClientIp,
-    upgrade: WebSocketUpgrade,
+    upgrade: Result<WebSocketUpgrade, WebSocketUpgradeRejection>,
 ) -> Response {
+    let upgrade = match upgrade {
+        Ok(upgrade) => upgrade,
+        // Not a WebSocket handshake: the contract's JSON error, not axum's text.
+        Err(rejection) => {
+            return AppError::new(
+                ErrorCode::BadQuery,
+                format!(
+                    "this route takes a WebSocket upgrade: {}",
+                    rejection.body_text()
+                ),
+            )
+            .into_response();
+        }
+    };
     let limits = state.config().stream;
     // Messages over the limit are read and refused with 1009 here, so that the socket stays
     // in step and the close frame reaches the client; only messages far over it are cut off
