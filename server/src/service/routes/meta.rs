@@ -67,10 +67,13 @@ const INDEX: &str = r#"<!doctype html>
 <body style="font-family: sans-serif; max-width: 40em; margin: 3em auto">
 <h1>Horizon</h1>
 <p>A world server for large user-generated 3D worlds. Upload models, place them as objects,
-and fetch immutable, content-addressed assets.</p>
+ask for everything that subtends a solid angle from where you are, and fetch immutable,
+content-addressed assets.</p>
 <ul>
 <li><a href="/v1/world">/v1/world</a>: the world's generation, size and rebuild state</li>
 <li><a href="/v1/models">/v1/models</a> and <a href="/v1/objects">/v1/objects</a>: its contents, a page at a time</li>
+<li><a href="/v1/cut?eye=0,2,0">/v1/cut?eye=x,y,z</a>: the cut from a point (<code>min_solid_angle</code>, <code>max_entries</code>, <code>max_bytes</code>, ...)</li>
+<li><code>/v1/stream</code>: the same cut kept up to date over WebSocket</li>
 <li><a href="/v1/openapi.json">/v1/openapi.json</a>: every route</li>
 <li><a href="/metrics">/metrics</a>, <a href="/healthz">/healthz</a></li>
 </ul>
