@@ -1,0 +1,22 @@
+//! A CPU ray caster for Horizon's meshes, and the image measures that compare two renders.
+//!
+//! The ray caster draws what a glTF client draws, closely enough to compare two ways of
+//! showing one world: a two-level BVH (obvhs compressed wide BVHs, one per submesh, and one
+//! over every placed submesh), glTF's front faces and `doubleSided`, `MASK` alpha, base colour
+//! factors, textures sampled trilinearly from a mip chain with the footprint of the pixel (as
+//! a GPU picks its mip level), vertex colours, and one fixed sun with ambient light.
+//! [`compare`] holds PSNR, SSIM (Wang et al. 2004) and the hole measure.
+//!
+//! The orthoview impostors of Chaudhuri et al. 2009 are to be rendered by this caster; they
+//! are not built yet.
+
+pub mod camera;
+pub mod compare;
+pub mod frame;
+pub mod scene;
+mod shade;
+
+pub use camera::Camera;
+pub use compare::{compare, Comparison};
+pub use frame::Frame;
+pub use scene::{PreparedMesh, Scene, SceneBuilder};
