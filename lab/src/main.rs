@@ -23,6 +23,7 @@ mod bench_descriptors;
 mod bench_service;
 mod calibrate;
 mod distance;
+mod fidelity;
 mod gen;
 mod input;
 mod load;
@@ -195,6 +196,16 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// What a cut's image loses against the full world: both ray-cast at seeded views (street
+    /// level, overhead, outside), PSNR, SSIM, pixels off by more than 16 levels, holes, and the
+    /// bytes, draw calls and triangles of each, with the bounds IoU of every aggregate.
+    Fidelity {
+        #[command(flatten)]
+        args: fidelity::Args,
+        /// Print JSON instead of a table.
+        #[arg(long)]
+        json: bool,
+    },
     /// `GET /v1/cut` under an open-loop load at seeded street-level eyes: p50 and p99.
     BenchCut {
         /// The server, `http://HOST:PORT`.
@@ -320,6 +331,7 @@ fn main() -> ExitCode {
             max_results,
             json,
         } => report::run(&dir, views, seed, min_solid_angle, max_results, json),
+        Command::Fidelity { args, json } => fidelity::run(&args, json),
         Command::Sweep {
             dirs,
             views,

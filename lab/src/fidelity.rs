@@ -1,0 +1,549 @@
+//! `horizon-lab fidelity`: what a cut's image loses against the full world, and what it
+//! costs. For seeded views (street level, overhead, outside looking in) it ray-casts the world
+//! twice with the same renderer (`horizon_impostor`): every object as its model, and the
+//! cut's entries. It reports PSNR, SSIM, the share of pixels off by more than 16 levels and
+//! holes, and for both the bytes to download, the draw calls (placements batched by asset,
+//! as a viewer draws them) and the triangles; and for every aggregate in the cut, the
+//! intersection over union of its bounds with those of the objects it covers.
+
+use std::collections::{HashMap, HashSet};
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::Instant;
+
+use anyhow::Context;
+use glam::{Affine3A, Vec3};
+use horizon_bvh::{Aabb, NodeId, DEFAULT_MIN_SOLID_ANGLE};
+use horizon_impostor::{compare, Camera, Comparison, PreparedMesh, SceneBuilder};
+use horizon_mesh::rng::Rng;
+use horizon_mesh::{import_bytes, Format, ImportOptions};
+use horizon_protocol::{Budgets, Entry, EntryKind, View};
+use horizon_server::outln;
+use horizon_server::service::cut::{plan, AssetTable};
+use horizon_world::World;
+use serde::Serialize;
+
+use crate::views::{viewpoints, EYE_HEIGHT};
+
+/// `horizon-lab fidelity`'s arguments.
+#[derive(Clone, Debug, clap::Args)]
+pub struct Args {
+    /// The built world directory.
+    pub dir: PathBuf,
+    /// Street-level views (one overhead and one outside view are always added).
+    #[arg(long, default_value_t = 2)]
+    pub street: usize,
+    /// Seed of the views.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Image width, pixels.
+    #[arg(long, default_value_t = 960)]
+    pub width: u32,
+    /// Image height, pixels.
+    #[arg(long, default_value_t = 540)]
+    pub height: u32,
+    /// Vertical field of view, degrees.
+    #[arg(long, default_value_t = 60.0)]
+    pub fov: f32,
+    /// Rays per pixel along each axis (2: four rays per pixel).
+    #[arg(long, default_value_t = 2)]
+    pub samples: u32,
+    /// The cut's smallest solid angle shown as itself.
+    #[arg(long, default_value_t = DEFAULT_MIN_SOLID_ANGLE)]
+    pub min_solid_angle: f64,
+    /// The cut's most entries.
+    #[arg(long, default_value_t = horizon_bvh::DEFAULT_MAX_RESULTS as u64)]
+    pub max_entries: u64,
+    /// The cut's draw-call budget.
+    #[arg(long)]
+    pub max_draw_calls: Option<u64>,
+    /// Folder to write each view's renders (full, cut, difference) into as PNG.
+    #[arg(long)]
+    pub images: Option<PathBuf>,
+}
+
+/// One view's figures.
+#[derive(Clone, Debug, Serialize)]
+pub struct ViewReport {
+    /// `street-1`, `overhead`, `outside`.
+    pub name: String,
+    /// The eye.
+    pub eye: [f32; 3],
+    /// The cut against the full world.
+    pub psnr: f64,
+    /// Mean SSIM of luma.
+    pub ssim: f64,
+    /// Share of pixels off by more than 16 levels.
+    pub off16: f64,
+    /// Share of the image the full world covers and the cut leaves to the sky.
+    pub holes: f64,
+    /// The full world: every model once.
+    pub full: Cost,
+    /// The cut.
+    pub cut: Cost,
+    /// Entries of the cut, and how many are aggregates.
+    pub entries: usize,
+    /// Aggregate entries.
+    pub aggregates: usize,
+    /// Bounds IoU of the cut's aggregates with what they cover: median, lowest, and how many
+    /// fall under 0.9.
+    pub iou_median: f64,
+    /// Lowest IoU.
+    pub iou_min: f64,
+    /// Aggregates with IoU under 0.9.
+    pub iou_under_0_9: usize,
+    /// Seconds to render both.
+    pub render_seconds: f64,
+}
+
+/// What drawing a set of entries costs a client.
+#[derive(Clone, Copy, Debug, Default, Serialize)]
+pub struct Cost {
+    /// Unique asset bytes.
+    pub bytes: u64,
+    /// Draw calls, every asset's placements batched into one instanced draw per submesh.
+    pub draw_calls: u64,
+    /// Triangles drawn.
+    pub triangles: u64,
+}
+
+/// The whole run.
+#[derive(Clone, Debug, Serialize)]
+pub struct Report {
+    /// The world directory.
+    pub world: String,
+    /// Objects in the world.
+    pub objects: usize,
+    /// Image size and rays per pixel.
+    pub width: u32,
+    /// Height.
+    pub height: u32,
+    /// Rays per pixel along each axis.
+    pub samples: u32,
+    /// The cut's parameters.
+    pub min_solid_angle: f64,
+    /// Most entries.
+    pub max_entries: u64,
+    /// Draw-call budget.
+    pub max_draw_calls: Option<u64>,
+    /// Per view.
+    pub views: Vec<ViewReport>,
+}
+
+/// Runs the measure and prints its table (or JSON).
+pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
+    let report = measure(args)?;
+    if json {
+        outln!("{}", serde_json::to_string_pretty(&report)?)?;
+    } else {
+        print_table(&report)?;
+    }
+    Ok(())
+}
+
+/// The stages: open the world, plan the full world once, then per view plan the cut, render
+/// both and compare.
+pub fn measure(args: &Args) -> anyhow::Result<Report> {
+    anyhow::ensure!(args.samples >= 1, "--samples must be at least 1");
+    let world = World::open(&args.dir).with_context(|| format!("open {}", args.dir.display()))?;
+    let table = AssetTable::default();
+    table.refresh(&world)?;
+    let bounds = world.with_tree(|t| {
+        let bvh = &t.bvh;
+        bvh.node(bvh.root()).map(|n| n.aabb())
+    })?;
+    let bounds = bounds.context("the world has no objects")?;
+    let mut assets = Assets::new(&world);
+
+    // The full world: a cut that refines everything.
+    let mut everything = View::at([0.0; 3]);
+    everything.min_solid_angle = 1e-12;
+    everything.budgets = Budgets {
+        max_entries: Some(horizon_protocol::MAX_ENTRIES_LIMIT),
+        ..Budgets::default()
+    };
+    let full_entries = world.with_served(|s| plan(s, &table, &everything).entries())?;
+    let full_scene = assets.scene(&full_entries)?;
+    let full_cost = cost(&full_entries);
+    let object_boxes = assets.object_boxes(&full_entries)?;
+    eprintln!(
+        "full world: {} objects, {} placed submeshes",
+        full_entries.len(),
+        full_scene.items()
+    );
+
+    let mut views = Vec::new();
+    for (name, camera) in cameras(&bounds, args) {
+        let mut view = View::at(camera.eye.to_array().map(f64::from));
+        view.min_solid_angle = args.min_solid_angle;
+        view.budgets = Budgets {
+            max_entries: Some(args.max_entries),
+            max_draw_calls: args.max_draw_calls,
+            ..Budgets::default()
+        };
+        let cut_entries = world.with_served(|s| plan(s, &table, &view).entries())?;
+        let cut_scene = assets.scene(&cut_entries)?;
+        let started = Instant::now();
+        let full = full_scene.render(&camera, args.samples);
+        let cut = cut_scene.render(&camera, args.samples);
+        let render_seconds = started.elapsed().as_secs_f64();
+        let Comparison {
+            psnr,
+            ssim,
+            off16,
+            holes,
+        } = compare(&full, &cut);
+        if let Some(dir) = &args.images {
+            std::fs::create_dir_all(dir)?;
+            full.save_png(&dir.join(format!("{name}-full.png")))?;
+            cut.save_png(&dir.join(format!("{name}-cut.png")))?;
+            difference(&full, &cut).save(dir.join(format!("{name}-diff.png")))?;
+        }
+        let ious = world.with_served(|s| assets.ious(s.tree, &cut_entries, &object_boxes))??;
+        let mut sorted = ious.clone();
+        sorted.sort_by(f64::total_cmp);
+        let report = ViewReport {
+            name: name.clone(),
+            eye: camera.eye.to_array(),
+            psnr,
+            ssim,
+            off16,
+            holes,
+            full: full_cost,
+            cut: cost(&cut_entries),
+            entries: cut_entries.len(),
+            aggregates: ious.len(),
+            iou_median: sorted.get(sorted.len() / 2).copied().unwrap_or(1.0),
+            iou_min: sorted.first().copied().unwrap_or(1.0),
+            iou_under_0_9: sorted.iter().filter(|&&v| v < 0.9).count(),
+            render_seconds,
+        };
+        eprintln!(
+            "{name}: PSNR {psnr:.1} dB, SSIM {ssim:.4}, holes {:.3}%, {} entries ({} aggregates), {:.1} s",
+            holes * 100.0,
+            report.entries,
+            report.aggregates,
+            render_seconds
+        );
+        views.push(report);
+    }
+    Ok(Report {
+        world: args.dir.display().to_string(),
+        objects: full_entries.len(),
+        width: args.width,
+        height: args.height,
+        samples: args.samples,
+        min_solid_angle: args.min_solid_angle,
+        max_entries: args.max_entries,
+        max_draw_calls: args.max_draw_calls,
+        views,
+    })
+}
+
+/// The seeded views: `street` at eye height looking along a seeded heading, one overhead
+/// looking down at 55 degrees, one outside the world looking at its centre.
+fn cameras(bounds: &Aabb, args: &Args) -> Vec<(String, Camera)> {
+    let (w, h, fov) = (args.width, args.height, args.fov);
+    let mut rng = Rng::new(args.seed ^ 0x5eed_f1de);
+    let centre = (bounds.min + bounds.max) * 0.5;
+    let extent = (bounds.max.x - bounds.min.x).max(bounds.max.z - bounds.min.z);
+    let mut out = Vec::new();
+    for (k, eye) in viewpoints(bounds, args.seed, args.street)
+        .into_iter()
+        .enumerate()
+    {
+        let yaw = rng.unit() * std::f32::consts::TAU;
+        let target = eye + Vec3::new(yaw.cos(), -0.05, yaw.sin());
+        out.push((
+            format!("street-{}", k + 1),
+            Camera::look_at(eye, target, w, h, fov),
+        ));
+    }
+    let yaw = rng.unit() * std::f32::consts::TAU;
+    let ground = Vec3::new(
+        centre.x + (rng.unit() - 0.5) * 0.5 * extent,
+        0.0,
+        centre.z + (rng.unit() - 0.5) * 0.5 * extent,
+    );
+    let height = 0.15 * extent + EYE_HEIGHT;
+    let back = height / 55f32.to_radians().tan();
+    let eye = ground + Vec3::new(-yaw.cos() * back, height, -yaw.sin() * back);
+    out.push((
+        "overhead".to_string(),
+        Camera::look_at(eye, ground, w, h, fov),
+    ));
+    let angle = rng.unit() * std::f32::consts::TAU;
+    let eye = Vec3::new(
+        centre.x + angle.cos() * 0.9 * extent,
+        0.2 * extent,
+        centre.z + angle.sin() * 0.9 * extent,
+    );
+    let target = Vec3::new(centre.x, 0.0, centre.z);
+    out.push((
+        "outside".to_string(),
+        Camera::look_at(eye, target, w, h, fov),
+    ));
+    out
+}
+
+/// Costs of a set of entries: unique assets' bytes and draw calls, every entry's triangles.
+fn cost(entries: &[Entry]) -> Cost {
+    let mut seen = HashSet::new();
+    let mut out = Cost::default();
+    for e in entries {
+        out.triangles += e.triangles;
+        let fresh: Vec<_> = e
+            .assets
+            .iter()
+            .filter(|a| seen.insert(a.hash.clone()))
+            .collect();
+        out.bytes += fresh.iter().map(|a| a.bytes).sum::<u64>();
+        // An entry's draw calls are its assets' submeshes; an asset already drawn adds no
+        // call, its placements join the same instanced draw.
+        if !fresh.is_empty() {
+            out.draw_calls += e.draw_calls;
+        }
+    }
+    out
+}
+
+/// Prepared assets by hash, loaded from the world's blobs on first use.
+struct Assets<'w> {
+    world: &'w World,
+    prepared: HashMap<String, (Arc<PreparedMesh>, horizon_mesh::Aabb)>,
+}
+
+impl<'w> Assets<'w> {
+    fn new(world: &'w World) -> Self {
+        Self {
+            world,
+            prepared: HashMap::new(),
+        }
+    }
+
+    fn get(&mut self, hash: &str) -> anyhow::Result<(Arc<PreparedMesh>, horizon_mesh::Aabb)> {
+        if let Some(p) = self.prepared.get(hash) {
+            return Ok(p.clone());
+        }
+        let bytes = self
+            .world
+            .blob(hash)?
+            .with_context(|| format!("asset {hash} is not in the world's blobs"))?;
+        let mesh = import_bytes(&bytes, Format::Glb, None, &ImportOptions::trusted())
+            .with_context(|| format!("asset {hash}"))?
+            .mesh;
+        let made = (Arc::new(PreparedMesh::new(&mesh)), mesh.bounds());
+        self.prepared.insert(hash.to_string(), made.clone());
+        Ok(made)
+    }
+
+    /// The scene of `entries`: every placement of every asset.
+    fn scene(&mut self, entries: &[Entry]) -> anyhow::Result<horizon_impostor::Scene> {
+        let mut builder = SceneBuilder::default();
+        let mut numbers: HashMap<String, usize> = HashMap::new();
+        for e in entries {
+            for p in &e.placements {
+                let number = match numbers.get(&p.asset) {
+                    Some(&n) => n,
+                    None => {
+                        let n = builder.register(self.get(&p.asset)?.0);
+                        numbers.insert(p.asset.clone(), n);
+                        n
+                    }
+                };
+                builder.add_registered(number, &affine(&p.matrix));
+            }
+        }
+        Ok(builder.build())
+    }
+
+    /// Every object's exact world box, by world object id (from the full world's entries).
+    fn object_boxes(&mut self, entries: &[Entry]) -> anyhow::Result<HashMap<u64, Aabb>> {
+        let mut out = HashMap::new();
+        for e in entries.iter().filter(|e| e.kind == EntryKind::Object) {
+            let id = object_id(&e.id).with_context(|| format!("entry id {}", e.id))?;
+            let mut b = Aabb::EMPTY;
+            for p in &e.placements {
+                let local = self.get(&p.asset)?.1;
+                b = b.union(world_box(&local, &affine(&p.matrix)));
+            }
+            out.insert(id, b);
+        }
+        Ok(out)
+    }
+
+    /// Bounds IoU of every aggregate entry of a cut with the objects its node covers.
+    fn ious(
+        &mut self,
+        tree: &horizon_world::Tree,
+        entries: &[Entry],
+        objects: &HashMap<u64, Aabb>,
+    ) -> anyhow::Result<Vec<f64>> {
+        let mut out = Vec::new();
+        let mut under = Vec::new();
+        for e in entries.iter().filter(|e| e.kind == EntryKind::Aggregate) {
+            let node = node_id(&e.id).with_context(|| format!("entry id {}", e.id))?;
+            under.clear();
+            tree.bvh.objects_under(NodeId(node), &mut under);
+            let mut covered = Aabb::EMPTY;
+            for &o in &under {
+                if let Some(b) = tree.world_id(o).and_then(|id| objects.get(&id)) {
+                    covered = covered.union(*b);
+                }
+            }
+            let mut drawn = Aabb::EMPTY;
+            for p in &e.placements {
+                let local = self.get(&p.asset)?.1;
+                drawn = drawn.union(world_box(&local, &affine(&p.matrix)));
+            }
+            out.push(iou(&drawn, &covered));
+        }
+        Ok(out)
+    }
+}
+
+/// Intersection over union of two boxes' volumes, each padded by 1% of the larger diagonal
+/// so that flat content (a ground tile) still has a volume.
+fn iou(a: &Aabb, b: &Aabb) -> f64 {
+    if a.is_empty() || b.is_empty() {
+        return 0.0;
+    }
+    let pad = 0.01 * (a.max - a.min).length().max((b.max - b.min).length());
+    let grow = |x: &Aabb| (x.min - Vec3::splat(pad), x.max + Vec3::splat(pad));
+    let (amin, amax) = grow(a);
+    let (bmin, bmax) = grow(b);
+    let volume = |lo: Vec3, hi: Vec3| {
+        let d = (hi - lo).max(Vec3::ZERO);
+        f64::from(d.x) * f64::from(d.y) * f64::from(d.z)
+    };
+    let inter = volume(amin.max(bmin), amax.min(bmax));
+    let union = volume(amin, amax) + volume(bmin, bmax) - inter;
+    if union > 0.0 {
+        inter / union
+    } else {
+        0.0
+    }
+}
+
+fn world_box(local: &horizon_mesh::Aabb, m: &Affine3A) -> Aabb {
+    let mut out = Aabb::EMPTY;
+    if local.min.x > local.max.x {
+        return out;
+    }
+    for i in 0..8 {
+        let c = Vec3::new(
+            if i & 1 == 0 { local.min.x } else { local.max.x },
+            if i & 2 == 0 { local.min.y } else { local.max.y },
+            if i & 4 == 0 { local.min.z } else { local.max.z },
+        );
+        out = out.with_point(m.transform_point3(c));
+    }
+    out
+}
+
+fn affine(m: &[f32; 12]) -> Affine3A {
+    Affine3A::from_cols_array(m)
+}
+
+/// `o:<id>@<generation>` -> id.
+fn object_id(id: &str) -> Option<u64> {
+    id.strip_prefix("o:")?.split('@').next()?.parse().ok()
+}
+
+/// `n:<node>@<hash>` -> node.
+fn node_id(id: &str) -> Option<u32> {
+    id.strip_prefix("n:")?.split('@').next()?.parse().ok()
+}
+
+/// Per-pixel absolute difference, amplified 4x so that small errors show.
+fn difference(a: &horizon_impostor::Frame, b: &horizon_impostor::Frame) -> image::RgbImage {
+    let mut out = image::RgbImage::new(a.width, a.height);
+    for (i, px) in out.pixels_mut().enumerate() {
+        let (p, q) = (a.color[i], b.color[i]);
+        px.0 = std::array::from_fn(|c| (p[c].abs_diff(q[c]) as u32 * 4).min(255) as u8);
+    }
+    out
+}
+
+fn print_table(r: &Report) -> anyhow::Result<()> {
+    outln!(
+        "{}: {} objects, {}x{} at {} rays per pixel, cut at {} sr, at most {} entries{}",
+        r.world,
+        r.objects,
+        r.width,
+        r.height,
+        r.samples * r.samples,
+        r.min_solid_angle,
+        r.max_entries,
+        r.max_draw_calls
+            .map_or(String::new(), |d| format!(", at most {d} draw calls"))
+    )?;
+    outln!()?;
+    outln!("| view | PSNR dB | SSIM | off >16 | holes | download full / cut | draw calls full / cut | triangles full / cut | entries (aggregates) | aggregate IoU median / min / < 0.9 |")?;
+    outln!("|---|---|---|---|---|---|---|---|---|---|")?;
+    for v in &r.views {
+        outln!(
+            "| {} | {:.1} | {:.4} | {:.2}% | {:.3}% | {} / {} ({:.2}x) | {} / {} ({:.2}x) | {} / {} ({:.2}x) | {} ({}) | {:.3} / {:.3} / {} |",
+            v.name,
+            v.psnr,
+            v.ssim,
+            v.off16 * 100.0,
+            v.holes * 100.0,
+            mb(v.full.bytes),
+            mb(v.cut.bytes),
+            ratio(v.cut.bytes, v.full.bytes),
+            v.full.draw_calls,
+            v.cut.draw_calls,
+            ratio(v.cut.draw_calls, v.full.draw_calls),
+            v.full.triangles,
+            v.cut.triangles,
+            ratio(v.cut.triangles, v.full.triangles),
+            v.entries,
+            v.aggregates,
+            v.iou_median,
+            v.iou_min,
+            v.iou_under_0_9
+        )?;
+    }
+    Ok(())
+}
+
+fn mb(bytes: u64) -> String {
+    format!("{:.2} MB", bytes as f64 / 1e6)
+}
+
+fn ratio(a: u64, b: u64) -> f64 {
+    a as f64 / (b as f64).max(1.0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn iou_is_one_for_equal_boxes_and_falls_with_overlap() {
+        let a = Aabb {
+            min: Vec3::ZERO,
+            max: Vec3::ONE,
+        };
+        assert!((iou(&a, &a) - 1.0).abs() < 1e-9);
+        let b = Aabb {
+            min: Vec3::new(0.5, 0.0, 0.0),
+            max: Vec3::new(1.5, 1.0, 1.0),
+        };
+        let v = iou(&a, &b);
+        assert!(v > 0.3 && v < 0.36, "{v}");
+        let far = Aabb {
+            min: Vec3::splat(10.0),
+            max: Vec3::splat(11.0),
+        };
+        assert_eq!(iou(&a, &far), 0.0);
+    }
+
+    #[test]
+    fn entry_ids_parse() {
+        assert_eq!(object_id("o:42@7"), Some(42));
+        assert_eq!(node_id("n:3@abc"), Some(3));
+        assert_eq!(object_id("n:3@abc"), None);
+    }
+}
