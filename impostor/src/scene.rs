@@ -167,11 +167,14 @@ impl Blas {
 pub struct SceneBuilder {
     meshes: Vec<Arc<PreparedMesh>>,
     items: Vec<Item>,
+    placements: u32,
 }
 
 /// One placed submesh.
 #[derive(Clone, Copy, Debug)]
 struct Item {
+    /// Which placement (in the order of `add` calls) it belongs to.
+    placement: u32,
     mesh: u32,
     submesh: u32,
     to_world: Affine34,
@@ -208,6 +211,8 @@ impl SceneBuilder {
     }
 
     fn add_at(&mut self, index: usize, mesh: &PreparedMesh, placement: &glam::Affine3A) {
+        let number = self.placements;
+        self.placements += 1;
         let placement = affine34(placement);
         for &(submesh, model) in &mesh.instances {
             if mesh.submeshes[submesh].is_none() {
@@ -219,6 +224,7 @@ impl SceneBuilder {
                 continue;
             }
             self.items.push(Item {
+                placement: number,
                 mesh: index as u32,
                 submesh: submesh as u32,
                 to_world,
@@ -285,6 +291,15 @@ impl Scene {
     /// Placed submeshes.
     pub fn items(&self) -> usize {
         self.items.len()
+    }
+
+    /// The placement (numbered in the order of the builder's `add` calls) seen at image point
+    /// (`x`, `y`), and its distance.
+    pub fn pick(&self, camera: &Camera, x: f32, y: f32) -> Option<(u32, f32)> {
+        let d = camera.direction(x, y);
+        let eye = V::new(camera.eye.x, camera.eye.y, camera.eye.z);
+        let hit = self.trace(eye, V::new(d.x, d.y, d.z))?;
+        Some((self.items[hit.item as usize].placement, hit.t))
     }
 
     /// Renders the scene from `camera` with `samples` x `samples` rays per pixel (at least 1),

@@ -128,3 +128,22 @@ fn comparing_a_render_with_one_missing_a_surface_counts_its_pixels_as_holes() {
     assert!(c.psnr < 40.0 && c.ssim < 1.0);
     assert_eq!(compare(&both, &both).holes, 0.0);
 }
+
+#[test]
+fn picking_names_the_placement_seen_at_a_pixel() {
+    let red = square(Vec4::new(1.0, 0.0, 0.0, 1.0), false, false);
+    let mesh = Arc::new(PreparedMesh::new(&red));
+    let mut scene = SceneBuilder::default();
+    // Placement 0 behind, placement 1 in front at the centre, placement 2 off to the right.
+    scene.add(&mesh, &Affine3A::IDENTITY);
+    scene.add(&mesh, &Affine3A::from_translation(Vec3::new(0.0, 0.0, 1.0)));
+    scene.add(&mesh, &Affine3A::from_translation(Vec3::new(3.0, 0.0, 0.0)));
+    let scene = scene.build();
+    let cam = camera();
+    let (front, t) = scene.pick(&cam, 32.0, 32.0).expect("a hit");
+    assert_eq!(front, 1);
+    assert!((t - 4.0).abs() < 1e-3);
+    // The third square spans x in [2, 4] at depth 5: about pixels 45 to 58.
+    assert_eq!(scene.pick(&cam, 51.0, 32.0).map(|p| p.0), Some(2));
+    assert_eq!(scene.pick(&cam, 2.0, 2.0), None);
+}

@@ -57,6 +57,15 @@ pub struct Args {
     /// The cut's draw-call budget.
     #[arg(long)]
     pub max_draw_calls: Option<u64>,
+    /// Instead of seeded views: render node N's aggregate alone against the objects it covers
+    /// alone, from above at 45 degrees and at the node's nearest display distance (times
+    /// `--node-distance`).
+    #[arg(long)]
+    pub node: Option<u32>,
+    /// With `--node`: the camera's distance as a multiple of the nearest display distance
+    /// (below 1: nearer than the aggregate was built to be seen, as when a budget binds).
+    #[arg(long, default_value_t = 1.0)]
+    pub node_distance: f32,
     /// Folder to write each view's renders (full, cut, difference) into as PNG.
     #[arg(long)]
     pub images: Option<PathBuf>,
@@ -92,6 +101,10 @@ pub struct ViewReport {
     pub iou_min: f64,
     /// Aggregates with IoU under 0.9.
     pub iou_under_0_9: usize,
+    /// The five aggregates covering the most objects: entry id and objects covered.
+    pub largest: Vec<(String, u64)>,
+    /// The five aggregates of lowest IoU: entry id and IoU.
+    pub iou_worst: Vec<(String, f64)>,
     /// Seconds to render both.
     pub render_seconds: f64,
 }
@@ -146,6 +159,13 @@ pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
 pub fn measure(args: &Args) -> anyhow::Result<Report> {
     anyhow::ensure!(args.samples >= 1, "--samples must be at least 1");
     let world = World::open(&args.dir).with_context(|| format!("open {}", args.dir.display()))?;
+    if let Some(node) = args.node {
+        let manifest = world.published_manifest()?;
+        anyhow::ensure!(
+            manifest.is_some_and(|m| m.nodes.contains_key(&node)),
+            "node {node} has no published aggregate"
+        );
+    }
     let table = AssetTable::default();
     table.refresh(&world)?;
     let bounds = world.with_tree(|t| {
@@ -172,6 +192,16 @@ pub fn measure(args: &Args) -> anyhow::Result<Report> {
         full_scene.items()
     );
 
+    if let Some(node) = args.node {
+        return focus(
+            args,
+            &world,
+            &mut assets,
+            &full_entries,
+            &object_boxes,
+            node,
+        );
+    }
     let mut views = Vec::new();
     for (name, camera) in cameras(&bounds, args) {
         let mut view = View::at(camera.eye.to_array().map(f64::from));
@@ -200,7 +230,10 @@ pub fn measure(args: &Args) -> anyhow::Result<Report> {
             difference(&full, &cut).save(dir.join(format!("{name}-diff.png")))?;
         }
         let ious = world.with_served(|s| assets.ious(s.tree, &cut_entries, &object_boxes))??;
-        let mut sorted = ious.clone();
+        let mut worst: Vec<(String, f64)> = ious.clone();
+        worst.sort_by(|a, b| a.1.total_cmp(&b.1));
+        worst.truncate(5);
+        let mut sorted: Vec<f64> = ious.iter().map(|i| i.1).collect();
         sorted.sort_by(f64::total_cmp);
         let report = ViewReport {
             name: name.clone(),
@@ -216,6 +249,8 @@ pub fn measure(args: &Args) -> anyhow::Result<Report> {
             iou_median: sorted.get(sorted.len() / 2).copied().unwrap_or(1.0),
             iou_min: sorted.first().copied().unwrap_or(1.0),
             iou_under_0_9: sorted.iter().filter(|&&v| v < 0.9).count(),
+            iou_worst: worst,
+            largest: largest(&cut_entries),
             render_seconds,
         };
         eprintln!(
@@ -237,6 +272,121 @@ pub fn measure(args: &Args) -> anyhow::Result<Report> {
         max_entries: args.max_entries,
         max_draw_calls: args.max_draw_calls,
         views,
+    })
+}
+
+/// One aggregate against what it covers, each alone, from above at 45 degrees, from as near
+/// as an unbudgeted cut shows the aggregate (times `--node-distance`).
+fn focus(
+    args: &Args,
+    world: &World,
+    assets: &mut Assets<'_>,
+    full: &[Entry],
+    boxes: &HashMap<u64, Aabb>,
+    node: u32,
+) -> anyhow::Result<Report> {
+    let manifest = world
+        .published_manifest()?
+        .context("the world has no published aggregates")?;
+    let aggregate = manifest
+        .nodes
+        .get(&node)
+        .with_context(|| format!("node {node} has no aggregate"))?
+        .clone();
+    let (covered, sphere, r_max) = world.with_served(|s| {
+        let mut under = Vec::new();
+        s.tree.bvh.objects_under(NodeId(node), &mut under);
+        let covered: HashSet<u64> = under.iter().filter_map(|&o| s.tree.world_id(o)).collect();
+        let n = s.tree.bvh.node(NodeId(node));
+        (covered, n.map(|n| n.bound()), n.map_or(0.0, |n| n.r_max()))
+    })?;
+    let sphere = sphere.with_context(|| format!("node {node} is not in the tree"))?;
+    let objects: Vec<Entry> = full
+        .iter()
+        .filter(|e| object_id(&e.id).is_some_and(|id| covered.contains(&id)))
+        .cloned()
+        .collect();
+    let mut bounds = Aabb::EMPTY;
+    for e in &objects {
+        if let Some(b) = object_id(&e.id).and_then(|id| boxes.get(&id)) {
+            bounds = bounds.union(*b);
+        }
+    }
+    anyhow::ensure!(!bounds.is_empty(), "node {node} covers no object");
+    let centre = (bounds.min + bounds.max) * 0.5;
+    let display = horizon_aggregate::budget::Display::of(
+        sphere.centre,
+        sphere.radius,
+        r_max,
+        &manifest.options,
+    );
+    let distance = (display.radius + display.distance) as f32;
+    let distance = distance * args.node_distance;
+    let eye = centre + Vec3::new(0.0, distance, distance) * std::f32::consts::FRAC_1_SQRT_2;
+    let camera = Camera::look_at(eye, centre, args.width, args.height, args.fov);
+    let (hash, bytes) = (aggregate.glb.clone(), aggregate.stats.bytes as u64);
+    let drawn = vec![Entry {
+        id: format!("n:{node}@{hash}"),
+        kind: EntryKind::Aggregate,
+        assets: vec![horizon_protocol::Asset {
+            hash: hash.clone(),
+            bytes,
+            role: horizon_protocol::AssetRole::Mesh,
+        }],
+        placements: vec![horizon_protocol::Placement {
+            asset: hash,
+            matrix: Affine3A::IDENTITY.to_cols_array(),
+        }],
+        level: 0,
+        pending: false,
+        bytes,
+        triangles: aggregate.stats.triangles_out,
+        draw_calls: aggregate.stats.submeshes.max(1) as u64,
+        center: centre.to_array(),
+        radius: 0.0,
+        covers: objects.len() as u64,
+    }];
+    let started = Instant::now();
+    let reference = assets.scene(&objects)?.render(&camera, args.samples);
+    let test = assets.scene(&drawn)?.render(&camera, args.samples);
+    let render_seconds = started.elapsed().as_secs_f64();
+    let c = compare(&reference, &test);
+    let name = format!("node-{node}");
+    if let Some(dir) = &args.images {
+        std::fs::create_dir_all(dir)?;
+        reference.save_png(&dir.join(format!("{name}-full.png")))?;
+        test.save_png(&dir.join(format!("{name}-cut.png")))?;
+        difference(&reference, &test).save(dir.join(format!("{name}-diff.png")))?;
+    }
+    let ious = world.with_served(|s| assets.ious(s.tree, &drawn, boxes))??;
+    let iou = ious.first().map_or(0.0, |i| i.1);
+    Ok(Report {
+        world: args.dir.display().to_string(),
+        objects: full.len(),
+        width: args.width,
+        height: args.height,
+        samples: args.samples,
+        min_solid_angle: args.min_solid_angle,
+        max_entries: args.max_entries,
+        max_draw_calls: args.max_draw_calls,
+        views: vec![ViewReport {
+            name,
+            eye: eye.to_array(),
+            psnr: c.psnr,
+            ssim: c.ssim,
+            off16: c.off16,
+            holes: c.holes,
+            full: cost(&objects),
+            cut: cost(&drawn),
+            entries: 1,
+            aggregates: 1,
+            iou_median: iou,
+            iou_min: iou,
+            iou_under_0_9: usize::from(iou < 0.9),
+            iou_worst: ious,
+            largest: largest(&drawn),
+            render_seconds,
+        }],
     })
 }
 
@@ -283,6 +433,18 @@ fn cameras(bounds: &Aabb, args: &Args) -> Vec<(String, Camera)> {
         "outside".to_string(),
         Camera::look_at(eye, target, w, h, fov),
     ));
+    out
+}
+
+/// The five aggregate entries that cover the most objects.
+fn largest(entries: &[Entry]) -> Vec<(String, u64)> {
+    let mut out: Vec<(String, u64)> = entries
+        .iter()
+        .filter(|e| e.kind == EntryKind::Aggregate)
+        .map(|e| (e.id.clone(), e.covers))
+        .collect();
+    out.sort_by(|a, b| b.1.cmp(&a.1).then_with(|| a.0.cmp(&b.0)));
+    out.truncate(5);
     out
 }
 
@@ -378,7 +540,7 @@ impl<'w> Assets<'w> {
         tree: &horizon_world::Tree,
         entries: &[Entry],
         objects: &HashMap<u64, Aabb>,
-    ) -> anyhow::Result<Vec<f64>> {
+    ) -> anyhow::Result<Vec<(String, f64)>> {
         let mut out = Vec::new();
         let mut under = Vec::new();
         for e in entries.iter().filter(|e| e.kind == EntryKind::Aggregate) {
@@ -396,7 +558,7 @@ impl<'w> Assets<'w> {
                 let local = self.get(&p.asset)?.1;
                 drawn = drawn.union(world_box(&local, &affine(&p.matrix)));
             }
-            out.push(iou(&drawn, &covered));
+            out.push((e.id.clone(), iou(&drawn, &covered)));
         }
         Ok(out)
     }
