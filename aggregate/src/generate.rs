@@ -1,7 +1,7 @@
 //! One node's aggregate (core paper sections 5 to 7): gather the children's representations,
 //! cull what cannot show, dedup near-duplicates (Table 1), merge into one instanced mesh,
-//! simplify with IAS to the node's budget (dropping the smallest instances where IAS stops
-//! short of it, `detail.rs`), atlas, merge the parts placed alike and bake the
+//! simplify with IAS to the node's budget, draw the objects whose simplified parts lost their
+//! shape (and, over the budget, the smallest others) as box proxies (`proxy.rs`), atlas, merge the parts placed alike and bake the
 //! placements that cost less written out than instanced into one submesh
 //! (`InstancedMesh::merge_coplaced_submeshes`, `bake_cheap_instances`: fewer draw calls and
 //! less JSON), encode (`ExportOptions::aggregate`: vertices shared in runs, 8-bit normals,
@@ -29,6 +29,7 @@ use crate::budget::{dedup_distance, Display};
 use crate::dedup::{plan, ModelUse};
 use crate::error::AggregateError;
 use crate::options::AggregateOptions;
+use crate::proxy::{ObjectPlacement, ProxyInput};
 use crate::source::{ModelSource, SourceModel};
 
 /// A model submesh: (model number, submesh index in the model).
@@ -127,13 +128,16 @@ pub struct NodeStats {
     /// That error in pixels at the nearest display distance.
     #[serde(default)]
     pub error_pixels: f64,
-    /// Instances dropped by detail culling because IAS stopped over the budget
-    /// (`detail.rs`).
+    /// Objects drawn as box proxies because their simplified parts lost their shape
+    /// (`proxy.rs`).
     #[serde(default)]
-    pub detail_culled: usize,
-    /// The largest footprint among them, pixels at the nearest display distance.
+    pub proxied_shape: usize,
+    /// Objects drawn as box proxies to fit the budget.
     #[serde(default)]
-    pub detail_culled_pixels: f64,
+    pub proxied_budget: usize,
+    /// The largest footprint among the latter, pixels at the nearest display distance.
+    #[serde(default)]
+    pub proxied_pixels: f64,
     /// Where the wall time went, stage by stage.
     #[serde(default)]
     pub stages: StageSeconds,
@@ -158,9 +162,9 @@ pub struct StageSeconds {
     /// IAS (or the baseline's QEM) and the handoff's versions.
     #[serde(default)]
     pub simplify: f64,
-    /// Detail culling.
+    /// Box proxies.
     #[serde(default)]
-    pub detail: f64,
+    pub proxy: f64,
     /// The texture atlas.
     #[serde(default)]
     pub atlas: f64,
@@ -184,7 +188,7 @@ impl StageSeconds {
             ("dedup", self.dedup),
             ("merge", self.merge),
             ("simplify", self.simplify),
-            ("detail", self.detail),
+            ("proxy", self.proxy),
             ("atlas", self.atlas),
             ("encode", self.encode),
             ("parts", self.parts),
@@ -199,7 +203,7 @@ impl StageSeconds {
         self.dedup += other.dedup;
         self.merge += other.merge;
         self.simplify += other.simplify;
-        self.detail += other.detail;
+        self.proxy += other.proxy;
         self.atlas += other.atlas;
         self.encode += other.encode;
         self.parts += other.parts;
@@ -288,11 +292,20 @@ pub fn generate_with(
     let mut merge = Merger::default();
     let mut part_of_submesh: Vec<PartKey> = Vec::new();
     let mut slot: HashMap<PartKey, usize> = HashMap::new();
+    let mut objects: Vec<ObjectPlacement> = Vec::with_capacity(kept.len());
+    let mut instance_objects: Vec<usize> = Vec::new();
     for p in &kept {
         let (model, align) = match replacements.get(&p.model) {
             Some(r) => (r.by, r.align),
             None => (p.model, Affine3A::IDENTITY),
         };
+        let object = objects.len();
+        objects.push(ObjectPlacement {
+            model,
+            transform: p.transform * align,
+            centre: p.centre,
+            radius: p.radius,
+        });
         let source = &sources[&model];
         for (s, inner) in source.placements.iter().enumerate() {
             let key = (model, s as u32);
@@ -323,11 +336,14 @@ pub fn generate_with(
                     submesh: index,
                     transform,
                 });
+                instance_objects.push(object);
             }
         }
     }
     let material_keys = std::mem::take(&mut merge.material_keys);
     let merged = merge.mesh;
+    let merged_instance_submeshes: Vec<usize> =
+        merged.instances.iter().map(|i| i.submesh).collect();
     stats.triangles_in = merged.expanded_triangle_count();
     stats.stages.merge = lap.lap();
     // Stage 5, simplify with IAS to the budget.
@@ -371,13 +387,36 @@ pub fn generate_with(
             .collect(),
     );
     stats.stages.simplify = lap.lap();
-    // Stage 6, detail culling: what IAS could not bring within the budget loses its smallest
-    // instances (this aggregate only: the handoff above keeps every version).
-    let (simplified, detail) =
-        crate::detail::cull_to_budget(simplified, stats.budget, &input.display, options);
-    stats.detail_culled = detail.instances;
-    stats.detail_culled_pixels = detail.largest_pixels;
-    stats.stages.detail = lap.lap();
+    // Stage 6, box proxies for the objects whose simplified parts lost their shape, and
+    // over the budget for the smallest others (this aggregate only: the handoff above keeps
+    // every version). IAS kept the instances of the submeshes it kept, in order.
+    let instance_objects: Vec<usize> = merged_instance_submeshes
+        .iter()
+        .zip(&instance_objects)
+        .filter(|(s, _)| kept_parts[**s].is_some())
+        .map(|(_, &o)| o)
+        .collect();
+    let parts: Vec<(PartKey, Option<usize>)> = part_of_submesh
+        .iter()
+        .copied()
+        .zip(kept_parts.iter().copied())
+        .collect();
+    let (simplified, proxies) = crate::proxy::apply(
+        simplified,
+        &ProxyInput {
+            instance_objects: &instance_objects,
+            objects: &objects,
+            parts: &parts,
+            sources: &sources,
+            budget: stats.budget,
+            display: &input.display,
+            textures,
+        },
+    );
+    stats.proxied_shape = proxies.shape;
+    stats.proxied_budget = proxies.budget;
+    stats.proxied_pixels = proxies.largest_pixels;
+    stats.stages.proxy = lap.lap();
     // Stage 7, atlas (section 7) and encode.
     let out = if input.atlas {
         let atlas_options = AtlasOptions {

@@ -8,10 +8,10 @@
 //!   every node whose key the store knows; [`BuildOptions`], [`BuildReport`].
 //! - `keys.rs`: [`node_keys`], what each node's aggregate is made from, hashed
 //!   ([`KeyHasher`]): the dirty tracking.
-//! - `generate.rs`: [`generate`], one node's pipeline: gather, cull, dedup, merge, IAS, atlas,
-//!   encode; [`Handoff`], what a node hands its parent.
-//! - `detail.rs`: detail culling, smallest instances first, where IAS cannot reach the
-//!   budget.
+//! - `generate.rs`: [`generate`], one node's pipeline: gather, cull, dedup, merge, IAS, box
+//!   proxies, atlas, encode; [`Handoff`], what a node hands its parent.
+//! - `proxy.rs`: box proxies for the objects whose simplified parts lost their shape, and
+//!   over the budget for the smallest others: nothing that shows is dropped.
 //! - `dedup.rs`: Table 1 dedup with PCA alignment (section 5.1).
 //! - `pca.rs`: principal frames and sign-flip alignment.
 //! - `budget.rs`: the display model behind every budget (triangles, texels, culling).
@@ -31,12 +31,12 @@ mod baseline;
 pub mod budget;
 mod build;
 pub mod dedup;
-pub mod detail;
 mod error;
 mod generate;
 mod keys;
 pub mod options;
 pub mod pca;
+pub mod proxy;
 mod source;
 pub mod store;
 
@@ -59,4 +59,4 @@ pub use store::{AggregateEntry, AggregateManifest, AggregateStore, MemoryStore, 
 /// Version of the aggregate format written by this build; part of every key, so aggregates of
 /// another format are never reused. Raise it whenever the bytes an aggregate is made of
 /// change for the same inputs.
-pub const FORMAT: u32 = 11;
+pub const FORMAT: u32 = 12;

@@ -302,6 +302,14 @@ impl Scene {
         Some((self.items[hit.item as usize].placement, hit.t))
     }
 
+    /// The distance along the ray from `origin` in direction `dir` (normalised here) to the
+    /// nearest surface that draws, if any.
+    pub fn cast(&self, origin: Vec3, dir: Vec3) -> Option<f32> {
+        let d = dir.try_normalize()?;
+        let hit = self.trace(V::new(origin.x, origin.y, origin.z), V::new(d.x, d.y, d.z))?;
+        Some(hit.t)
+    }
+
     /// Renders the scene from `camera` with `samples` x `samples` rays per pixel (at least 1),
     /// rows in parallel.
     pub fn render(&self, camera: &Camera, samples: u32) -> Frame {
