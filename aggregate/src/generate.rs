@@ -410,7 +410,6 @@ pub fn generate_with(
             sources: &sources,
             budget: stats.budget,
             display: &input.display,
-            textures,
         },
     );
     stats.proxied_shape = proxies.shape;

@@ -9,13 +9,16 @@
 //! instead (the detail culling this stage replaces) left holes where whole objects had been.
 //!
 //! So, per model drawn in the aggregate, this stage compares the surface area its simplified
-//! parts keep with the area of the model's own parts. Below [`SHAPE_KEPT`], every placement
-//! of the model is drawn as the model's proxy instead: its box in model space, 12 triangles,
-//! each face coloured (vertex colours, linear) with the mean colour of the model's surface
-//! facing that way (material factor x mean texel x mean vertex colour, weighted by area). If
-//! the aggregate is still over its budget, more objects take their proxies, smallest on
-//! screen first, as long as a proxy has fewer triangles than what it replaces. A model's proxy
-//! is one submesh instanced at every placement, so its bytes are paid once per aggregate.
+//! parts keep with the area of the model's own parts ([`SHAPE_KEPT`]). A model that lost its
+//! shape is drawn at every placement as its proxy instead, if a box can stand for it (its
+//! surface fills the box's faces, [`BOX_FILL`]; a fence's box would be a wall): its box in
+//! model space, 12 triangles, each face textured with what the model shows on that side,
+//! ray-cast orthographically (an orthoview of Chaudhuri et al. 2009 with one view per face,
+//! [`TILE`] texels along a face). If the aggregate is still over its budget, more such
+//! objects take their proxies, smallest on screen first, while a proxy has fewer triangles
+//! than what it replaces. The others keep their simplified parts, over the budget if need
+//! be. A model's proxy is one submesh instanced at every placement, so its bytes are paid
+//! once per aggregate; the atlas takes its texture in with the others.
 //!
 //! Proxies are this aggregate's only: the handoff to the parent keeps the simplified parts,
 //! and the parent decides again at its own budget.
@@ -23,9 +26,9 @@
 use std::collections::{BTreeMap, HashMap};
 use std::sync::Arc;
 
-use glam::{Affine3A, Vec3, Vec4};
-use horizon_atlas::TextureCache;
-use horizon_mesh::{Instance, InstancedMesh, Material, Submesh};
+use glam::{Affine3A, Vec2, Vec3, Vec4};
+use horizon_impostor::{PreparedMesh, SceneBuilder};
+use horizon_mesh::{Instance, InstancedMesh, Material, Submesh, Texture, TextureRef, Wrap};
 
 use crate::budget::Display;
 use crate::generate::PartKey;
@@ -39,6 +42,10 @@ pub const SHAPE_KEPT: f64 = 0.7;
 /// A side of a model (the area facing one axis direction) holding at least this share of the
 /// largest side must keep [`SHAPE_KEPT`] of its area, or the model is drawn as its proxy.
 pub const SIDE_SHARE: f64 = 0.2;
+
+/// The share of a box face the model's surface facing that way must cover for the box to
+/// stand for the model.
+pub const BOX_FILL: f64 = 0.6;
 
 /// Triangles of a box proxy.
 pub const PROXY_TRIANGLES: u64 = 12;
@@ -82,8 +89,6 @@ pub struct ProxyInput<'a> {
     pub budget: u64,
     /// Where the aggregate is shown.
     pub display: &'a Display,
-    /// Decoded textures, for mean colours.
-    pub textures: &'a TextureCache,
 }
 
 /// Replaces the objects that lost their shape, then as many more as the budget needs, by
@@ -91,8 +96,9 @@ pub struct ProxyInput<'a> {
 /// keep their order; proxy submeshes and instances come after them.
 pub fn apply(mesh: InstancedMesh, input: &ProxyInput<'_>) -> (InstancedMesh, ProxyReport) {
     let mut report = ProxyReport::default();
-    // Stage 1: which models lost their shape.
-    let lost = shape_lost(&mesh, input);
+    // Stage 1: which models lost their shape, and which a box can stand for.
+    let shapes = assess(&mesh, input);
+    let boxable = |model: u64| shapes.get(&model).is_some_and(|s| s.boxable);
     // Stage 2: every object's triangles, and those of the lost shapes' proxies.
     let mut triangles = vec![0u64; input.objects.len()];
     for (inst, &o) in mesh.instances.iter().zip(input.instance_objects) {
@@ -101,7 +107,7 @@ pub fn apply(mesh: InstancedMesh, input: &ProxyInput<'_>) -> (InstancedMesh, Pro
     let mut proxied: Vec<bool> = input
         .objects
         .iter()
-        .map(|o| lost.contains_key(&o.model))
+        .map(|o| shapes.get(&o.model).is_some_and(|s| s.lost && s.boxable))
         .collect();
     report.shape = proxied.iter().filter(|&&p| p).count();
     let mut total: u64 = triangles
@@ -113,7 +119,9 @@ pub fn apply(mesh: InstancedMesh, input: &ProxyInput<'_>) -> (InstancedMesh, Pro
     // saves triangles.
     if total > input.budget {
         let mut candidates: Vec<(f64, usize)> = (0..input.objects.len())
-            .filter(|&o| !proxied[o] && triangles[o] > PROXY_TRIANGLES)
+            .filter(|&o| {
+                !proxied[o] && triangles[o] > PROXY_TRIANGLES && boxable(input.objects[o].model)
+            })
             .map(|o| {
                 let ob = &input.objects[o];
                 (input.display.object_pixels(ob.centre, ob.radius), o)
@@ -146,14 +154,6 @@ pub fn apply(mesh: InstancedMesh, input: &ProxyInput<'_>) -> (InstancedMesh, Pro
         used[inst.submesh] = true;
     }
     mesh.retain_submeshes(&used);
-    mesh.materials.push(Material {
-        name: Some("proxy".into()),
-        base_color_factor: Vec4::ONE,
-        metallic_factor: 0.0,
-        roughness_factor: 1.0,
-        ..Material::default()
-    });
-    let material = mesh.materials.len() - 1;
     let mut proxy_of: HashMap<u64, Option<usize>> = HashMap::new();
     for (o, object) in input.objects.iter().enumerate() {
         if !proxied[o] {
@@ -161,8 +161,19 @@ pub fn apply(mesh: InstancedMesh, input: &ProxyInput<'_>) -> (InstancedMesh, Pro
         }
         let submesh = *proxy_of.entry(object.model).or_insert_with(|| {
             let source = input.sources.get(&object.model)?;
-            let mut proxy = box_proxy(source, input.textures)?;
-            proxy.material = Some(material);
+            let (mut proxy, texture) = box_proxy(source)?;
+            mesh.textures.push(texture);
+            mesh.materials.push(Material {
+                name: Some("proxy".into()),
+                base_color_texture: Some(TextureRef {
+                    texture: mesh.textures.len() - 1,
+                    transform: None,
+                }),
+                metallic_factor: 0.0,
+                roughness_factor: 1.0,
+                ..Material::default()
+            });
+            proxy.material = Some(mesh.materials.len() - 1);
             mesh.submeshes.push(proxy);
             Some(mesh.submeshes.len() - 1)
         });
@@ -176,13 +187,25 @@ pub fn apply(mesh: InstancedMesh, input: &ProxyInput<'_>) -> (InstancedMesh, Pro
     (mesh, report)
 }
 
-/// The models whose simplified parts lost their shape, with the share of area kept. Areas are
-/// taken in model space over every instance of every part: the total, and the area facing
-/// each of the six axis directions (what a viewer from that side sees of it, before
-/// occlusion). A model lost its shape when its simplified parts keep under [`SHAPE_KEPT`] of
-/// the total, or of the area facing a direction that holds at least [`SIDE_SHARE`] of the
-/// largest such area (a roof gone, walls turned to a shard).
-fn shape_lost(mesh: &InstancedMesh, input: &ProxyInput<'_>) -> HashMap<u64, f64> {
+/// What stage 1 finds about one model drawn in the aggregate.
+#[derive(Clone, Copy, Debug, Default)]
+struct Shape {
+    /// Its simplified parts lost its shape.
+    lost: bool,
+    /// Its box stands for it: seen along each axis, its surface fills most of the box's face.
+    boxable: bool,
+}
+
+/// Every model drawn, assessed. Areas are taken in model space over every instance of every
+/// part: the total, and the area facing each of the six axis directions (what a viewer from
+/// that side sees of it, before occlusion). A model lost its shape when its simplified parts
+/// keep under [`SHAPE_KEPT`] of the total, or of the area facing a direction that holds at
+/// least [`SIDE_SHARE`] of the largest such area (a roof gone, walls turned to a shard). Its
+/// box stands for it when, on every face of the box of at least [`SIDE_SHARE`] of the largest
+/// face's area, the model's surface facing that way covers [`BOX_FILL`] of the face: a
+/// building, not a fence or a bare tree, whose box would be a wall where the model is mostly
+/// gaps.
+fn assess(mesh: &InstancedMesh, input: &ProxyInput<'_>) -> HashMap<u64, Shape> {
     // Per model: source and kept areas, total then per direction.
     let mut areas: BTreeMap<u64, ([f64; 7], [f64; 7])> = BTreeMap::new();
     for &((model, s), k) in input.parts {
@@ -192,7 +215,10 @@ fn shape_lost(mesh: &InstancedMesh, input: &ProxyInput<'_>) -> HashMap<u64, f64>
         let Some(part) = source.mesh.submeshes.get(s as usize) else {
             continue;
         };
-        let inner = source.placements.get(s as usize).map_or(&[][..], Vec::as_slice);
+        let inner = source
+            .placements
+            .get(s as usize)
+            .map_or(&[][..], Vec::as_slice);
         let entry = areas.entry(model).or_default();
         for m in inner {
             add_areas(&mut entry.0, part, m);
@@ -207,11 +233,27 @@ fn shape_lost(mesh: &InstancedMesh, input: &ProxyInput<'_>) -> HashMap<u64, f64>
             if source[0] <= 0.0 {
                 return None;
             }
-            let share = kept[0] / source[0];
             let largest = source[1..].iter().copied().fold(0.0, f64::max);
             let side_lost = (1..7)
                 .any(|d| source[d] >= SIDE_SHARE * largest && kept[d] < SHAPE_KEPT * source[d]);
-            (share < SHAPE_KEPT || side_lost).then_some((model, share))
+            let lost = kept[0] < SHAPE_KEPT * source[0] || side_lost;
+            let bounds = input.sources.get(&model)?.mesh.bounds();
+            let e = (bounds.max - bounds.min).max(glam::Vec3::ZERO);
+            let faces = [
+                e.y * e.z,
+                e.y * e.z,
+                e.x * e.z,
+                e.x * e.z,
+                e.x * e.y,
+                e.x * e.y,
+            ]
+            .map(f64::from);
+            let biggest = faces.iter().copied().fold(0.0, f64::max);
+            let boxable = biggest > 0.0
+                && (0..6).all(|d| {
+                    faces[d] < SIDE_SHARE * biggest || source[d + 1] >= BOX_FILL * faces[d]
+                });
+            Some((model, Shape { lost, boxable }))
         })
         .collect()
 }
@@ -245,185 +287,257 @@ fn area(sub: &Submesh) -> f64 {
     out[0]
 }
 
-/// The model's box in model space, each face coloured by the surface facing its way; `None`
-/// for a model without area.
-fn box_proxy(source: &SourceModel, textures: &TextureCache) -> Option<Submesh> {
+/// The model's box in model space, each face textured with what the model shows on that side,
+/// ray-cast orthographically from outside the face (`horizon_impostor`), at most
+/// [`TILE`] texels along a face; `None` for a model without area. The six tiles share one
+/// PNG, each with a one-texel border repeating its edge.
+fn box_proxy(source: &SourceModel) -> Option<(Submesh, Texture)> {
     let model = &source.mesh;
     let bounds = model.bounds();
     if bounds.min.cmpgt(bounds.max).any() {
         return None;
     }
-    // Per face (+x, -x, +y, -y, +z, -z): area-weighted colour of the triangles facing it.
-    let mut sums = [(Vec4::ZERO, 0.0f32); 6];
-    let material_colors: Vec<Vec4> = model
-        .materials
-        .iter()
-        .map(|m| {
-            let texel = m
-                .base_color_texture
-                .as_ref()
-                .and_then(|t| model.textures.get(t.texture))
-                .and_then(|t| textures.decode(t).ok())
-                .map_or(Vec4::ONE, |d| {
-                    // The chain's last level is the mean texel, averaged in linear light.
-                    let texel = d.level(d.levels() - 1).get_pixel(0, 0).0;
-                    linear(texel.map(f32::from))
-                });
-            m.base_color_factor * texel
-        })
-        .collect();
-    for inst in &model.instances {
-        let sub = &model.submeshes[inst.submesh];
-        let color = sub
-            .material
-            .and_then(|m| material_colors.get(m))
-            .copied()
-            .unwrap_or(Vec4::ONE);
-        let flip = if inst.transform.matrix3.determinant() < 0.0 {
-            -1.0
-        } else {
-            1.0
-        };
-        for t in sub.indices.chunks_exact(3) {
-            let [a, b, c] = [0, 1, 2].map(|i| {
-                inst.transform
-                    .transform_point3(sub.positions[t[i] as usize])
-            });
-            let n = (b - a).cross(c - a) * flip;
-            let area = n.length() * 0.5;
-            if area <= 0.0 || !area.is_finite() {
-                continue;
-            }
-            let vertex = sub.colors.as_ref().map_or(Vec4::ONE, |cs| {
-                (cs[t[0] as usize] + cs[t[1] as usize] + cs[t[2] as usize]) / 3.0
-            });
-            let face = facing(n);
-            sums[face].0 += color * vertex * area;
-            sums[face].1 += area;
-        }
-    }
-    let total = sums
-        .iter()
-        .fold((Vec4::ZERO, 0.0), |acc, s| (acc.0 + s.0, acc.1 + s.1));
-    let mean = if total.1 > 0.0 {
-        total.0 / total.1
-    } else {
-        Vec4::ONE
-    };
-    let colors: [Vec4; 6] = std::array::from_fn(|f| {
-        let c = if sums[f].1 > 0.0 {
-            sums[f].0 / sums[f].1
-        } else {
-            mean
-        };
-        c.truncate().extend(1.0)
-    });
-    Some(cuboid(bounds.min, bounds.max, &colors))
-}
-
-/// Which box face a normal faces: 0 +x, 1 -x, 2 +y, 3 -y, 4 +z, 5 -z.
-fn facing(n: Vec3) -> usize {
-    let a = n.abs();
-    if a.x >= a.y && a.x >= a.z {
-        usize::from(n.x < 0.0)
-    } else if a.y >= a.z {
-        2 + usize::from(n.y < 0.0)
-    } else {
-        4 + usize::from(n.z < 0.0)
-    }
-}
-
-/// The box from `lo` to `hi`: 24 vertices (four per face, with the face's normal and colour),
-/// 12 triangles, counter-clockwise seen from outside. Faces without area are left out.
-fn cuboid(lo: Vec3, hi: Vec3, colors: &[Vec4; 6]) -> Submesh {
-    let mut out = Submesh {
-        normals: Some(Vec::new()),
-        colors: Some(Vec::new()),
-        ..Submesh::default()
-    };
-    // For each face: its normal and two in-plane axes (u x v = normal).
-    let faces = [
-        (Vec3::X, Vec3::Y, Vec3::Z),
-        (Vec3::NEG_X, Vec3::Z, Vec3::Y),
-        (Vec3::Y, Vec3::Z, Vec3::X),
-        (Vec3::NEG_Y, Vec3::X, Vec3::Z),
-        (Vec3::Z, Vec3::X, Vec3::Y),
-        (Vec3::NEG_Z, Vec3::Y, Vec3::X),
-    ];
-    let centre = (lo + hi) * 0.5;
-    let half = (hi - lo) * 0.5;
-    for (f, &(n, u, v)) in faces.iter().enumerate() {
-        let (du, dv) = (u * half, v * half);
-        if du.length_squared() == 0.0 || dv.length_squared() == 0.0 {
+    let mut scene = SceneBuilder::default();
+    scene.add(&Arc::new(PreparedMesh::new(model)), &Affine3A::IDENTITY);
+    let scene = scene.build();
+    let centre = (bounds.min + bounds.max) * 0.5;
+    let half = (bounds.max - bounds.min) * 0.5;
+    let margin = half.length().max(1e-3);
+    // Stage 1: each face's tile, sampled from outside along the face's inward normal.
+    let mut tiles: Vec<(usize, u32, u32, Vec<Vec4>)> = Vec::new();
+    for (f, &(n, u, v)) in FACES.iter().enumerate() {
+        let (lu, lv) = ((u * half).length() * 2.0, (v * half).length() * 2.0);
+        if lu <= 0.0 || lv <= 0.0 {
             continue;
         }
+        let (w, h) = tile_size(lu, lv);
+        let texel = (lu / w as f32).max(lv / h as f32);
+        let face = centre + n * (n.abs().dot(half) + margin);
+        let mut texels: Vec<Option<Vec4>> = Vec::with_capacity((w * h) as usize);
+        for j in 0..h {
+            for i in 0..w {
+                let su = 2.0 * (i as f32 + 0.5) / w as f32 - 1.0;
+                let sv = 2.0 * (j as f32 + 0.5) / h as f32 - 1.0;
+                let from = face + u * half * su + v * half * sv;
+                texels.push(scene.surface(from, -n, texel).map(|s| s.albedo));
+            }
+        }
+        tiles.push((f, w, h, fill_misses(texels)));
+    }
+    if tiles.is_empty() {
+        return None;
+    }
+    // Stage 2: the tiles side by side in one image, each framed by a copy of its edge.
+    let width: u32 = tiles.iter().map(|t| t.1 + 2).sum();
+    let height: u32 = tiles.iter().map(|t| t.2 + 2).max().unwrap_or(1);
+    let mut image = image::RgbaImage::new(width, height);
+    let mut x0 = 0;
+    let mut rects = [None; 6];
+    for (f, w, h, texels) in &tiles {
+        for y in 0..h + 2 {
+            for x in 0..w + 2 {
+                let (tx, ty) = (x.clamp(1, *w) - 1, y.clamp(1, *h) - 1);
+                let c = texels[(ty * w + tx) as usize];
+                let [r, g, b] = srgb(c);
+                image.put_pixel(x0 + x, y, image::Rgba([r, g, b, 255]));
+            }
+        }
+        rects[*f] = Some((x0 + 1, 1, *w, *h));
+        x0 += w + 2;
+    }
+    let mut png = Vec::new();
+    image
+        .write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
+        .ok()?;
+    let texture = Texture {
+        bytes: png,
+        mime_type: "image/png".into(),
+        size: (width, height),
+        wrap_u: Wrap::ClampToEdge,
+        wrap_v: Wrap::ClampToEdge,
+    };
+    // Stage 3: the box, each face's corners on its tile's corners.
+    let mut out = Submesh {
+        normals: Some(Vec::new()),
+        uvs: Some(Vec::new()),
+        ..Submesh::default()
+    };
+    for (f, &(n, u, v)) in FACES.iter().enumerate() {
+        let Some((x, y, w, h)) = rects[f] else {
+            continue;
+        };
         let c = centre + n * half;
         let base = out.positions.len() as u32;
-        for (su, sv) in [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)] {
-            out.positions.push(c + du * su + dv * sv);
-        }
-        if let (Some(ns), Some(cs)) = (out.normals.as_mut(), out.colors.as_mut()) {
-            ns.extend([n; 4]);
-            cs.extend([colors[f]; 4]);
+        for (su, sv) in [(-1.0f32, -1.0f32), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)] {
+            out.positions.push(c + u * half * su + v * half * sv);
+            let tu = (x as f32 + (su + 1.0) * 0.5 * w as f32) / width as f32;
+            let tv = (y as f32 + (sv + 1.0) * 0.5 * h as f32) / height as f32;
+            if let (Some(ns), Some(uvs)) = (out.normals.as_mut(), out.uvs.as_mut()) {
+                ns.push(n);
+                uvs.push(Vec2::new(tu, tv));
+            }
         }
         out.indices
             .extend([base, base + 1, base + 2, base, base + 2, base + 3]);
     }
-    out
+    Some((out, texture))
 }
 
-/// sRGB bytes (as floats) and linear alpha to linear RGBA.
-fn linear(c: [f32; 4]) -> Vec4 {
-    let l = |s: f32| {
-        let s = s / 255.0;
-        if s <= 0.040_45 {
-            s / 12.92
-        } else {
-            ((s + 0.055) / 1.055).powf(2.4)
-        }
+/// The six faces of a box: outward normal and two in-plane axes with u x v = normal.
+const FACES: [(Vec3, Vec3, Vec3); 6] = [
+    (Vec3::X, Vec3::Y, Vec3::Z),
+    (Vec3::NEG_X, Vec3::Z, Vec3::Y),
+    (Vec3::Y, Vec3::Z, Vec3::X),
+    (Vec3::NEG_Y, Vec3::X, Vec3::Z),
+    (Vec3::Z, Vec3::X, Vec3::Y),
+    (Vec3::NEG_Z, Vec3::Y, Vec3::X),
+];
+
+/// Texels along a face's longer side.
+pub const TILE: u32 = 16;
+
+/// A face tile's texels: [`TILE`] along the longer side, in proportion (at least 2) along
+/// the other.
+fn tile_size(lu: f32, lv: f32) -> (u32, u32) {
+    let other =
+        |short: f32, long: f32| ((TILE as f32 * short / long).round() as u32).clamp(2, TILE);
+    if lu >= lv {
+        (TILE, other(lv, lu))
+    } else {
+        (other(lu, lv), TILE)
+    }
+}
+
+/// A tile's texels with every miss (a gap in the model, seen through the box's face) given
+/// the mean of the hits: a box face is opaque.
+fn fill_misses(texels: Vec<Option<Vec4>>) -> Vec<Vec4> {
+    let hits: Vec<Vec4> = texels.iter().flatten().copied().collect();
+    let mean = if hits.is_empty() {
+        Vec4::new(0.5, 0.5, 0.5, 1.0)
+    } else {
+        hits.iter().copied().sum::<Vec4>() / hits.len() as f32
     };
-    Vec4::new(l(c[0]), l(c[1]), l(c[2]), c[3] / 255.0)
+    texels.into_iter().map(|t| t.unwrap_or(mean)).collect()
+}
+
+/// Linear colour to sRGB bytes.
+fn srgb(c: Vec4) -> [u8; 3] {
+    c.truncate().to_array().map(|v| {
+        let v = v.clamp(0.0, 1.0);
+        let s = if v <= 0.003_130_8 {
+            12.92 * v
+        } else {
+            1.055 * v.powf(1.0 / 2.4) - 0.055
+        };
+        (s * 255.0).round() as u8
+    })
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
 
+    /// A closed box from `lo` to `hi`, counter-clockwise outside, in one untextured material
+    /// of `color` (linear).
+    fn solid(lo: Vec3, hi: Vec3, color: Vec4) -> InstancedMesh {
+        let corner = |i: usize| {
+            Vec3::new(
+                if i & 1 == 0 { lo.x } else { hi.x },
+                if i & 2 == 0 { lo.y } else { hi.y },
+                if i & 4 == 0 { lo.z } else { hi.z },
+            )
+        };
+        let indices = vec![
+            0, 2, 1, 1, 2, 3, 4, 5, 6, 5, 7, 6, 0, 1, 4, 1, 5, 4, 2, 6, 3, 3, 6, 7, 0, 4, 2, 2, 4,
+            6, 1, 3, 5, 3, 7, 5,
+        ];
+        InstancedMesh {
+            submeshes: vec![Submesh {
+                positions: (0..8).map(corner).collect(),
+                indices,
+                material: Some(0),
+                ..Submesh::default()
+            }],
+            instances: vec![Instance {
+                submesh: 0,
+                transform: Affine3A::IDENTITY,
+            }],
+            materials: vec![Material {
+                base_color_factor: color,
+                ..Material::default()
+            }],
+            textures: Vec::new(),
+        }
+    }
+
     #[test]
-    fn a_cuboid_is_closed_outward_and_coloured_per_face() {
-        let colors: [Vec4; 6] = std::array::from_fn(|f| Vec4::new(f as f32 / 6.0, 0.0, 0.0, 1.0));
-        let b = cuboid(Vec3::ZERO, Vec3::new(1.0, 2.0, 3.0), &colors);
+    fn a_proxy_is_a_closed_outward_box_textured_with_what_each_side_shows() {
+        // A red block with a blue slab on its top: from above the proxy shows blue, from the
+        // sides red below and blue at the top.
+        let mut mesh = solid(
+            Vec3::ZERO,
+            Vec3::new(2.0, 3.0, 1.0),
+            Vec4::new(1.0, 0.0, 0.0, 1.0),
+        );
+        let slab = solid(
+            Vec3::new(0.0, 3.0, 0.0),
+            Vec3::new(2.0, 3.2, 1.0),
+            Vec4::new(0.0, 0.0, 1.0, 1.0),
+        );
+        mesh.submeshes.push(Submesh {
+            material: Some(1),
+            ..slab.submeshes[0].clone()
+        });
+        mesh.materials.push(slab.materials[0].clone());
+        mesh.instances.push(Instance {
+            submesh: 1,
+            transform: Affine3A::IDENTITY,
+        });
+        let source = SourceModel::new("block".into(), mesh, Vec::new(), Vec::new());
+        let (b, texture) = box_proxy(&source).expect("a proxy");
         assert_eq!(b.triangle_count(), PROXY_TRIANGLES);
-        assert_eq!(b.positions.len(), 24);
-        let centre = Vec3::new(0.5, 1.0, 1.5);
+        let centre = Vec3::new(1.0, 1.6, 0.5);
         let normals = b.normals.as_ref().expect("normals");
-        let vertex_colors = b.colors.as_ref().expect("colours");
         for t in b.indices.chunks_exact(3) {
             let [p, q, r] = [0, 1, 2].map(|i| b.positions[t[i] as usize]);
             let n = (q - p).cross(r - p);
-            // Outward: the winding's normal points away from the centre and matches the
-            // stored normal and the face's colour.
-            assert!(n.dot(p - centre) > 0.0);
-            let stored = normals[t[0] as usize];
-            assert!(n.normalize().dot(stored) > 0.999);
-            assert_eq!(vertex_colors[t[0] as usize], colors[facing(stored)]);
+            assert!(n.dot(p - centre) > 0.0, "outward");
+            assert!(n.normalize().dot(normals[t[0] as usize]) > 0.999);
         }
-        // Area: 2 (1x2 + 1x3 + 2x3) = 22.
-        assert!((area(&b) - 22.0).abs() < 1e-5);
+        // Sample the texture at each face's centre and near its top edge.
+        let image = image::load_from_memory(&texture.bytes)
+            .expect("png")
+            .to_rgba8();
+        let uvs = b.uvs.as_ref().expect("uvs");
+        let at = |face: usize, fu: f32, fv: f32| {
+            let k = face * 4;
+            let uv = uvs[k] + (uvs[k + 1] - uvs[k]) * fu + (uvs[k + 3] - uvs[k]) * fv;
+            let x = ((uv.x * texture.size.0 as f32) as u32).min(texture.size.0 - 1);
+            let y = ((uv.y * texture.size.1 as f32) as u32).min(texture.size.1 - 1);
+            image.get_pixel(x, y).0
+        };
+        // Face 2 is +y: blue. Face 0 is +x (u along y): red in the middle, blue at the top.
+        let top = at(2, 0.5, 0.5);
+        assert!(top[2] > 200 && top[0] < 50, "{top:?}");
+        let side = at(0, 0.5, 0.5);
+        assert!(side[0] > 200 && side[2] < 50, "{side:?}");
+        let rim = at(0, 0.99, 0.5);
+        assert!(rim[2] > 200, "{rim:?}");
     }
 
     #[test]
-    fn a_flat_box_leaves_out_its_empty_faces() {
-        let b = cuboid(Vec3::ZERO, Vec3::new(4.0, 0.0, 4.0), &[Vec4::ONE; 6]);
-        assert_eq!(b.triangle_count(), 4);
+    fn tiles_keep_the_face_proportions_within_bounds() {
+        assert_eq!(tile_size(10.0, 5.0), (TILE, TILE / 2));
+        assert_eq!(tile_size(1.0, 100.0), (2, TILE));
+        assert_eq!(tile_size(3.0, 3.0), (TILE, TILE));
     }
 
     #[test]
-    fn facing_picks_the_dominant_axis_and_its_sign() {
-        assert_eq!(facing(Vec3::new(0.9, 0.1, -0.2)), 0);
-        assert_eq!(facing(Vec3::new(-0.9, 0.1, -0.2)), 1);
-        assert_eq!(facing(Vec3::new(0.1, 0.5, 0.2)), 2);
-        assert_eq!(facing(Vec3::new(0.1, -0.5, 0.2)), 3);
-        assert_eq!(facing(Vec3::new(0.1, 0.2, -0.5)), 5);
+    fn gaps_in_a_face_take_the_mean_of_what_it_shows() {
+        let red = Vec4::new(1.0, 0.0, 0.0, 1.0);
+        let blue = Vec4::new(0.0, 0.0, 1.0, 1.0);
+        let filled = fill_misses(vec![Some(red), None, Some(blue)]);
+        assert_eq!(filled[1], (red + blue) * 0.5);
+        assert_eq!(filled[0], red);
     }
 }

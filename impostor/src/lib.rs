@@ -19,4 +19,4 @@ mod shade;
 pub use camera::Camera;
 pub use compare::{compare, Comparison};
 pub use frame::Frame;
-pub use scene::{PreparedMesh, Scene, SceneBuilder};
+pub use scene::{PreparedMesh, Scene, SceneBuilder, Surface};

@@ -10,7 +10,7 @@
 use std::sync::Arc;
 use std::time::Duration;
 
-use glam::{Vec2, Vec3};
+use glam::{Vec2, Vec3, Vec4};
 use glam34::{Affine3A as Affine34, Vec3A as V};
 use horizon_mesh::{InstancedMesh, Submesh};
 use obvhs::aabb::Aabb as BoxA;
@@ -364,7 +364,10 @@ impl Scene {
     /// The closest surface along the ray from `origin` in direction `dir` (unit), if any.
     fn trace(&self, origin: V, dir: V) -> Option<Hit> {
         let tlas = self.tlas.as_ref()?;
-        let ray = Ray::new(origin, dir, 1e-4, f32::INFINITY);
+        // obvhs picks a ray's octant by comparison and its inverse direction by sign bit, so a
+        // negative zero component would send the traversal the wrong way: adding zero makes
+        // every zero positive.
+        let ray = Ray::new(origin, dir + V::ZERO, 1e-4, f32::INFINITY);
         let mut best: Option<Hit> = None;
         let mut top = RayHit::none();
         tlas.ray_traverse(ray, &mut top, |r, id| {
@@ -376,7 +379,7 @@ impl Scene {
             };
             let local = Ray::new(
                 item.to_local.transform_point3a(r.origin),
-                item.to_local.transform_vector3a(r.direction),
+                item.to_local.transform_vector3a(r.direction) + V::ZERO,
                 r.tmin,
                 r.tmax,
             );
@@ -413,12 +416,32 @@ impl Scene {
         best
     }
 
-    /// The linear colour of `hit` seen along `dir`, with the mip level of a footprint of
+    /// The lit linear colour of `hit` seen along `dir`, with the mip level of a footprint of
     /// `spread` radians.
     fn shade(&self, hit: &Hit, dir: V, spread: f32) -> Vec3 {
+        let s = self.surface_of(hit, dir, spread, 0.0);
+        s.albedo.truncate() * light(s.normal)
+    }
+
+    /// What the ray from `origin` along `dir` meets first, unlit: `width` is the world size of
+    /// the sample (for the mip level), as for an orthographic view.
+    pub fn surface(&self, origin: Vec3, dir: Vec3, width: f32) -> Option<Surface> {
+        let d = dir.try_normalize()?;
+        let dir = V::new(d.x, d.y, d.z);
+        let hit = self.trace(V::new(origin.x, origin.y, origin.z), dir)?;
+        Some(self.surface_of(&hit, dir, 0.0, width))
+    }
+
+    /// The surface at `hit`: its footprint is `t x spread + width`, over the cosine of the
+    /// view angle.
+    fn surface_of(&self, hit: &Hit, dir: V, spread: f32, width: f32) -> Surface {
         let item = &self.items[hit.item as usize];
         let Some(blas) = &self.meshes[item.mesh as usize].submeshes[item.submesh as usize] else {
-            return Vec3::ZERO;
+            return Surface {
+                t: hit.t,
+                albedo: Vec4::ZERO,
+                normal: Vec3::Y,
+            };
         };
         let tri = blas.corners(hit.triangle);
         let (u, v) = (hit.u, hit.v);
@@ -456,7 +479,7 @@ impl Scene {
                     let (t0, t1, t2) = (map(tri[0]), map(tri[1]), map(tri[2]));
                     let texel_area =
                         ((t1 - t0).perp_dot(t2 - t0) * 0.5).abs() * chain.texels() as f32;
-                    let footprint = hit.t * spread / cos;
+                    let footprint = (hit.t * spread + width) / cos;
                     let density = (texel_area / area.max(1e-12)).sqrt();
                     (footprint * density).max(1e-12).log2()
                 });
@@ -467,9 +490,23 @@ impl Scene {
         if let Some(colors) = &sub.colors {
             color *= colors[tri[0]] * w + colors[tri[1]] * u + colors[tri[2]] * v;
         }
-        let n = Vec3::new(normal.x, normal.y, normal.z);
-        color.truncate() * light(n)
+        Surface {
+            t: hit.t,
+            albedo: color,
+            normal: Vec3::new(normal.x, normal.y, normal.z),
+        }
     }
+}
+
+/// What a ray meets: distance, unlit colour and the normal facing the ray.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Surface {
+    /// Distance along the ray.
+    pub t: f32,
+    /// Linear base colour times vertex colour, with alpha.
+    pub albedo: Vec4,
+    /// Unit shading normal, turned towards the ray's origin.
+    pub normal: Vec3,
 }
 
 /// Möller-Trumbore: distance and barycentrics of the hit, if the ray meets the triangle

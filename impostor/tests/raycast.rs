@@ -147,3 +147,15 @@ fn picking_names_the_placement_seen_at_a_pixel() {
     assert_eq!(scene.pick(&cam, 51.0, 32.0).map(|p| p.0), Some(2));
     assert_eq!(scene.pick(&cam, 2.0, 2.0), None);
 }
+
+#[test]
+fn axis_aligned_rays_with_negative_zeros_still_hit() {
+    let red = square(Vec4::new(1.0, 0.0, 0.0, 1.0), false, false);
+    let mut scene = SceneBuilder::default();
+    scene.add(&Arc::new(PreparedMesh::new(&red)), &Affine3A::IDENTITY);
+    let scene = scene.build();
+    for dir in [Vec3::NEG_Z, -Vec3::Z, Vec3::new(-0.0, 0.0, -1.0)] {
+        let t = scene.cast(Vec3::new(0.2, 0.3, 5.0), dir);
+        assert_eq!(t, Some(5.0), "{dir:?}");
+    }
+}

@@ -13,6 +13,7 @@
 //!   `bench_descriptors.rs`: `bench-descriptors`; `bench_service.rs`: `bench-service` (uploads,
 //!   freshness, asset load against `horizon serve`).
 //! - `load.rs`: `load`, the query API under simulated viewers and mutations.
+//! - `fidelity.rs`: `fidelity`, what a cut's image loses against the full world, ray-cast.
 //! - `calibrate.rs`: `calibrate`, Table 1.
 //! - `distance.rs`: `distance`, the Hausdorff yardstick.
 //! - `views.rs`: the seeded viewpoints they share; `input.rs`: a built world's BVH input.
