@@ -13,8 +13,8 @@
 //! shape is drawn at every placement as its proxy instead, if a box can stand for it (its
 //! surface fills the box's faces, [`BOX_FILL`]; a fence's box would be a wall): its box in
 //! model space, 12 triangles, each face textured with what the model shows on that side,
-//! ray-cast orthographically (an orthoview of Chaudhuri et al. 2009 with one view per face,
-//! [`TILE`] texels along a face). If the aggregate is still over its budget, more such
+//! ray-cast orthographically (an orthoview of Chaudhuri et al. 2009 with one view per face, a
+//! texel per pixel at the nearest display distance, at most [`TILE`] along a side). If the aggregate is still over its budget, more such
 //! objects take their proxies, smallest on screen first, while a proxy has fewer triangles
 //! than what it replaces. The others keep their simplified parts, over the budget if need
 //! be. A model's proxy is one submesh instanced at every placement, so its bytes are paid
@@ -161,7 +161,8 @@ pub fn apply(mesh: InstancedMesh, input: &ProxyInput<'_>) -> (InstancedMesh, Pro
         }
         let submesh = *proxy_of.entry(object.model).or_insert_with(|| {
             let source = input.sources.get(&object.model)?;
-            let (mut proxy, texture) = box_proxy(source)?;
+            let texel = input.display.nearest_length_of_pixels(1.0) as f32;
+            let (mut proxy, texture) = box_proxy(source, texel)?;
             mesh.textures.push(texture);
             mesh.materials.push(Material {
                 name: Some("proxy".into()),
@@ -288,10 +289,11 @@ fn area(sub: &Submesh) -> f64 {
 }
 
 /// The model's box in model space, each face textured with what the model shows on that side,
-/// ray-cast orthographically from outside the face (`horizon_impostor`), at most
-/// [`TILE`] texels along a face; `None` for a model without area. The six tiles share one
-/// PNG, each with a one-texel border repeating its edge.
-fn box_proxy(source: &SourceModel) -> Option<(Submesh, Texture)> {
+/// ray-cast orthographically from outside the face (`horizon_impostor`), a texel about
+/// `texel` wide (one pixel at the aggregate's nearest display distance: the atlas resamples
+/// it to its own density), from 2 to [`TILE`] texels along a side; `None` for a model without
+/// area. The six tiles share one PNG, each with a one-texel border repeating its edge.
+fn box_proxy(source: &SourceModel, texel: f32) -> Option<(Submesh, Texture)> {
     let model = &source.mesh;
     let bounds = model.bounds();
     if bounds.min.cmpgt(bounds.max).any() {
@@ -310,7 +312,7 @@ fn box_proxy(source: &SourceModel) -> Option<(Submesh, Texture)> {
         if lu <= 0.0 || lv <= 0.0 {
             continue;
         }
-        let (w, h) = tile_size(lu, lv);
+        let (w, h) = tile_size(lu, lv, texel);
         let texel = (lu / w as f32).max(lv / h as f32);
         let face = centre + n * (n.abs().dot(half) + margin);
         let mut texels: Vec<Option<Vec4>> = Vec::with_capacity((w * h) as usize);
@@ -393,19 +395,21 @@ const FACES: [(Vec3, Vec3, Vec3); 6] = [
     (Vec3::NEG_Z, Vec3::Y, Vec3::X),
 ];
 
-/// Texels along a face's longer side.
-pub const TILE: u32 = 16;
+/// The most texels along a side of a face tile.
+pub const TILE: u32 = 64;
 
-/// A face tile's texels: [`TILE`] along the longer side, in proportion (at least 2) along
-/// the other.
-fn tile_size(lu: f32, lv: f32) -> (u32, u32) {
-    let other =
-        |short: f32, long: f32| ((TILE as f32 * short / long).round() as u32).clamp(2, TILE);
-    if lu >= lv {
-        (TILE, other(lv, lu))
-    } else {
-        (other(lu, lv), TILE)
-    }
+/// A face tile's texels for sides `lu` and `lv` long: one per `texel`, from 2 to [`TILE`]
+/// along each side.
+fn tile_size(lu: f32, lv: f32, texel: f32) -> (u32, u32) {
+    let texels = |side: f32| {
+        let n = (side / texel.max(f32::MIN_POSITIVE)).ceil();
+        if n.is_finite() {
+            (n as u32).clamp(2, TILE)
+        } else {
+            TILE
+        }
+    };
+    (texels(lu), texels(lv))
 }
 
 /// A tile's texels with every miss (a gap in the model, seen through the box's face) given
@@ -494,7 +498,7 @@ mod tests {
             transform: Affine3A::IDENTITY,
         });
         let source = SourceModel::new("block".into(), mesh, Vec::new(), Vec::new());
-        let (b, texture) = box_proxy(&source).expect("a proxy");
+        let (b, texture) = box_proxy(&source, 0.1).expect("a proxy");
         assert_eq!(b.triangle_count(), PROXY_TRIANGLES);
         let centre = Vec3::new(1.0, 1.6, 0.5);
         let normals = b.normals.as_ref().expect("normals");
@@ -526,10 +530,10 @@ mod tests {
     }
 
     #[test]
-    fn tiles_keep_the_face_proportions_within_bounds() {
-        assert_eq!(tile_size(10.0, 5.0), (TILE, TILE / 2));
-        assert_eq!(tile_size(1.0, 100.0), (2, TILE));
-        assert_eq!(tile_size(3.0, 3.0), (TILE, TILE));
+    fn tiles_have_a_texel_per_pixel_within_bounds() {
+        assert_eq!(tile_size(10.0, 5.0, 0.5), (20, 10));
+        assert_eq!(tile_size(0.1, 1000.0, 0.5), (2, TILE));
+        assert_eq!(tile_size(3.0, 3.0, 0.0), (TILE, TILE));
     }
 
     #[test]
