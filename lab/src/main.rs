@@ -265,7 +265,8 @@ enum Command {
 
 #[derive(Debug, Subcommand)]
 enum GenCommand {
-    /// Writes a benchmark world (village, island, city or city9) as a world directory.
+    /// Writes a benchmark world (village, island, city, city9 or city-distinct) as a world
+    /// directory.
     World {
         /// The world's name.
         name: String,
@@ -278,6 +279,9 @@ enum GenCommand {
         /// assets/models).
         #[arg(long)]
         assets: Option<PathBuf>,
+        /// city-distinct only: the number of buildings (default 60,000).
+        #[arg(long)]
+        objects: Option<usize>,
     },
     /// Writes one of the benchmark models shaped like the IAS paper's Table 2:
     /// maple-tree, village-mesh, patio-chair or stonehenge.
@@ -323,7 +327,8 @@ fn main() -> ExitCode {
             dir,
             seed,
             assets,
-        }) => gen::world(&name, &dir, seed, assets.as_deref()),
+            objects,
+        }) => gen::world(&name, &dir, seed, assets.as_deref(), objects),
         Command::Report {
             dir,
             views,

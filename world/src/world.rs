@@ -181,6 +181,9 @@ pub enum Change {
     },
 }
 
+/// Models [`World::create_with`] makes and stores at a time.
+pub const CREATE_BATCH: usize = 256;
+
 impl World {
     /// Writes a new world into `root`: every model normalised and stored under its content
     /// hash (models whose GLBs are identical share one record, the first name kept), then
@@ -193,6 +196,29 @@ impl World {
         models: &[(String, InstancedMesh)],
         objects: &[(usize, Affine3A)],
     ) -> Result<World, WorldError> {
+        Self::create_with(
+            root,
+            name,
+            seed,
+            models.len(),
+            &|k| Ok(models[k].clone()),
+            objects,
+            &|_, _| {},
+        )
+    }
+
+    /// [`World::create`] for worlds too large to hold in memory: model `k` of `count` is
+    /// made by `model(k)` when it is stored, [`CREATE_BATCH`] at a time in parallel;
+    /// `progress(done, count)` follows the models.
+    pub fn create_with(
+        root: &Path,
+        name: &str,
+        seed: u64,
+        count: usize,
+        model: &(dyn Fn(usize) -> Result<(String, InstancedMesh), WorldError> + Sync),
+        objects: &[(usize, Affine3A)],
+        progress: &(dyn Fn(usize, usize) + Sync),
+    ) -> Result<World, WorldError> {
         if root.join("world.db").exists() || is_legacy(root) {
             return Err(WorldError::Inconsistent(format!(
                 "{} already holds a world",
@@ -201,16 +227,24 @@ impl World {
         }
         std::fs::create_dir_all(root).map_err(|e| WorldError::io(root, e))?;
         let world = Self::open_stores(root, name, seed)?;
-        let stored: Vec<(Vec<u8>, serde_json::Value)> = models
-            .par_iter()
-            .map(|(model_name, mesh)| Ok((normalise(model_name, mesh)?, stats(mesh))))
-            .collect::<Result<_, WorldError>>()?;
-        let mut numbers = Vec::with_capacity(models.len());
-        for ((model_name, _), (glb, stats)) in models.iter().zip(&stored) {
-            let row = world
-                .store_model(glb, glb, model_name, None, stats, None)?
-                .0;
-            numbers.push(row.number);
+        let mut numbers = Vec::with_capacity(count);
+        for first in (0..count).step_by(CREATE_BATCH) {
+            let batch = first..(first + CREATE_BATCH).min(count);
+            let stored: Vec<(String, Vec<u8>, serde_json::Value)> = batch
+                .into_par_iter()
+                .map(|k| {
+                    let (model_name, mesh) = model(k)?;
+                    let glb = normalise(&model_name, &mesh)?;
+                    Ok((model_name, glb, stats(&mesh)))
+                })
+                .collect::<Result<_, WorldError>>()?;
+            for (model_name, glb, stats) in &stored {
+                let row = world
+                    .store_model(glb, glb, model_name, None, stats, None)?
+                    .0;
+                numbers.push(row.number);
+            }
+            progress(numbers.len(), count);
         }
         let mutations: Vec<Mutation> = objects
             .iter()

@@ -32,6 +32,7 @@ pub mod shapes;
 pub mod textures;
 pub mod worlds;
 
+pub use worlds::distinct::{city_distinct_layout, distinct_building, CITY_DISTINCT_OBJECTS};
 pub use worlds::{generate_world, generate_world_with, World, WorldObject, WORLD_NAMES};
 
 use horizon_mesh::InstancedMesh;

@@ -11,6 +11,7 @@
 //! - `village`, `island`, `city` below: one layout function per world.
 //! - [`parts`]: the parametric models and small textures the worlds are built from.
 
+pub mod distinct;
 pub mod parts;
 
 use std::collections::HashMap;
