@@ -33,7 +33,7 @@ const STREET: f32 = 16.0;
 /// Where each of `objects` buildings stands: building `k` at lot `k` of a square grid of
 /// blocks (3 x 3 lots of 32 m, 16 m streets), turned to a seeded multiple of 90 degrees.
 pub fn city_distinct_layout(seed: u64, objects: usize) -> Vec<Affine3A> {
-    let root = Rng::new(seed).fork(0xD157_1C7);
+    let root = Rng::new(seed).fork(0x0D15_71C7);
     let per_block = LOTS_PER_BLOCK * LOTS_PER_BLOCK;
     let blocks = objects.div_ceil(per_block);
     let side = (blocks as f64).sqrt().ceil().max(1.0) as usize;
@@ -328,7 +328,7 @@ fn rect(m: &mut MeshBuilder, p: [Vec3; 4], normal: Vec3, uvs: [Vec2; 4]) {
 /// The building's own facade: plaster or brick in its colour with noise, string courses in
 /// its accent colour. 256 x 256, repeating every [`FACADE_TILE`] metres.
 fn facade_texture(seed: u64, b: &Building) -> Result<Texture, WorldgenError> {
-    let brick = seed % 3 == 0;
+    let brick = seed.is_multiple_of(3);
     let (wall, accent) = (b.wall, b.accent);
     let image = paint(256, |u, v| {
         let n = tileable_fbm(seed, u, v, 16, 4);
