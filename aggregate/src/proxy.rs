@@ -280,14 +280,6 @@ fn add_areas(out: &mut [f64; 7], sub: &Submesh, m: &Affine3A) {
     }
 }
 
-/// Surface area of a submesh in its own space.
-#[cfg(test)]
-fn area(sub: &Submesh) -> f64 {
-    let mut out = [0.0; 7];
-    add_areas(&mut out, sub, &Affine3A::IDENTITY);
-    out[0]
-}
-
 /// The model's box in model space, each face textured with what the model shows on that side,
 /// ray-cast orthographically from outside the face (`horizon_impostor`), a texel about
 /// `texel` wide (one pixel at the aggregate's nearest display distance: the atlas resamples
