@@ -202,8 +202,9 @@ struct Shape {
 /// that side sees of it, before occlusion). A model lost its shape when its simplified parts
 /// keep under [`SHAPE_KEPT`] of the total, or of the area facing a direction that holds at
 /// least [`SIDE_SHARE`] of the largest such area (a roof gone, walls turned to a shard). Its
-/// box stands for it when, on every face of the box of at least [`SIDE_SHARE`] of the largest
-/// face's area, the model's surface facing that way covers [`BOX_FILL`] of the face: a
+/// box stands for it when, on every face of the box but the underside (worlds are Y-up and
+/// objects stand on the ground) of at least [`SIDE_SHARE`] of the largest face's area, the
+/// model's surface facing that way covers [`BOX_FILL`] of the face: a
 /// building, not a fence or a bare tree, whose box would be a wall where the model is mostly
 /// gaps.
 fn assess(mesh: &InstancedMesh, input: &ProxyInput<'_>) -> HashMap<u64, Shape> {
@@ -250,8 +251,10 @@ fn assess(mesh: &InstancedMesh, input: &ProxyInput<'_>) -> HashMap<u64, Shape> {
             ]
             .map(f64::from);
             let biggest = faces.iter().copied().fold(0.0, f64::max);
+            // The underside (-y, face 3) faces the ground: a building without a floor is
+            // still a box to every viewer above it.
             let boxable = biggest > 0.0
-                && (0..6).all(|d| {
+                && (0..6).filter(|&d| d != 3).all(|d| {
                     faces[d] < SIDE_SHARE * biggest || source[d + 1] >= BOX_FILL * faces[d]
                 });
             Some((model, Shape { lost, boxable }))

@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
-# Cut fidelity (issue: cuts that beat the naive world): the village and the city, generated
-# with seed 1 and built from scratch with the current code, then `horizon-lab fidelity` on
+# Cut fidelity (issue: cuts that beat the naive world): the village, the city and a
+# city-distinct of DISTINCT buildings (default 2,000), generated with seed 1 and built with the
+# current code, then `horizon-lab fidelity` on
 # each (2 street-level views, one overhead, one outside; 960x540, 60 degrees, 4 rays per
 # pixel; cut at 0.001 sr with at most 4,000 entries), and on the city the overhead view again
 # with the entry budget lifted. Tables and JSON go to OUT/, renders to OUT/images/ (not kept
@@ -15,10 +16,15 @@ WORK=${WORK:-/tmp/horizon-fidelity}
 H=target/release/horizon
 L=target/release/horizon-lab
 mkdir -p "$OUT" "$WORK"
-for world in village city; do
+DISTINCT=${DISTINCT:-2000}
+for world in village city city-distinct; do
   dir="$WORK/$world"
   if [ ! -f "$dir/world.db" ]; then
-    "$L" gen world "$world" "$dir" --seed 1 > /dev/null
+    if [ "$world" = city-distinct ]; then
+      "$L" gen world "$world" "$dir" --seed 1 --objects "$DISTINCT" > "$OUT/gen_$world.txt"
+    else
+      "$L" gen world "$world" "$dir" --seed 1 > /dev/null
+    fi
   fi
   if [ ! -f "$dir/.built" ]; then
     /usr/bin/time -v "$H" build "$dir" > "$OUT/build_$world.txt" 2> "$WORK/build_$world.time"
