@@ -59,4 +59,4 @@ pub use store::{AggregateEntry, AggregateManifest, AggregateStore, MemoryStore, 
 /// Version of the aggregate format written by this build; part of every key, so aggregates of
 /// another format are never reused. Raise it whenever the bytes an aggregate is made of
 /// change for the same inputs.
-pub const FORMAT: u32 = 16;
+pub const FORMAT: u32 = 17;

@@ -6,7 +6,9 @@
 //! the decoded texture size and widened to whole texels. The box may leave [0, size] when the
 //! texture wraps; baking samples the source with its wrap mode there, which is the same as
 //! shifting the island by whole tiles. Charts of one material whose boxes overlap merge into
-//! their union, so a texture used by many islands is stored once. Untextured materials, and
+//! their union, so a texture used by many islands is stored once; so do all the charts of one
+//! texture that fill at least [`DENSE_FILL`] of their union's box (a box proxy's six face tiles
+//! become one chart with one gutter, not six). Untextured materials, and
 //! submeshes without UVs, get one flat patch per material whose every vertex maps to its centre.
 
 use std::collections::HashMap;
@@ -129,8 +131,15 @@ pub(crate) fn chart_mesh(
             .push(patch(None, &default, Vec4::ONE, options.patch_side));
     }
     merge_overlapping(&mut out);
+    merge_dense(&mut out);
     out
 }
+
+/// The least share of their union's box that a texture's charts must fill to be stored as that
+/// one box: a texture laid out as tiles (a box proxy's faces, a hand-made atlas) is copied
+/// whole, one chart and one gutter instead of one per tile, while a texture whose islands are
+/// scattered over it keeps only what they use.
+pub(crate) const DENSE_FILL: f64 = 0.5;
 
 /// A flat patch of `material`'s base colour times `mean`; `key` is the material's index.
 fn patch(key: Option<usize>, material: &Material, mean: Vec4, side: u32) -> Chart {
@@ -221,7 +230,56 @@ fn merge_overlapping(charting: &mut Charting) {
             break;
         }
     }
-    // Renumber: surviving charts keep their order.
+    renumber(charting, &mut sets);
+}
+
+/// Merges all the textured charts of one material and texture into their union when they fill
+/// at least [`DENSE_FILL`] of it (and the union stays within the chart cap), and renumbers the
+/// placements. Runs after [`merge_overlapping`], so the charts of a group are disjoint and
+/// their areas add up.
+fn merge_dense(charting: &mut Charting) {
+    let charts = &charting.charts;
+    let mut groups: HashMap<(Option<usize>, Option<usize>), Vec<usize>> = HashMap::new();
+    for (c, chart) in charts.iter().enumerate().filter(|(_, c)| !c.is_patch()) {
+        groups
+            .entry((chart.material, chart.texture))
+            .or_default()
+            .push(c);
+    }
+    let mut sets = DisjointSets::new(charts.len());
+    let mut unions = Vec::new();
+    for members in groups.values().filter(|m| m.len() > 1) {
+        let (mut min, mut max) = (DVec2::splat(f64::INFINITY), DVec2::NEG_INFINITY);
+        let mut filled = 0.0;
+        for &c in members {
+            let size = charts[c].max - charts[c].min;
+            filled += size.x * size.y;
+            min = min.min(charts[c].min);
+            max = max.max(charts[c].max);
+        }
+        let size = max - min;
+        let first = members[0];
+        if filled >= DENSE_FILL * size.x * size.y && size.cmple(charts[first].cap).all() {
+            for &c in &members[1..] {
+                sets.join_into(c, first);
+            }
+            unions.push((first, min, max));
+        }
+    }
+    if unions.is_empty() {
+        return;
+    }
+    for (c, min, max) in unions {
+        charting.charts[c].min = min;
+        charting.charts[c].max = max;
+    }
+    renumber(charting, &mut sets);
+}
+
+/// Keeps the charts that are their own set's root, in order, and points every placement at
+/// its set's surviving chart.
+fn renumber(charting: &mut Charting, sets: &mut DisjointSets) {
+    let charts = &mut charting.charts;
     let mut new_index = vec![usize::MAX; charts.len()];
     let mut kept = Vec::new();
     for c in 0..charts.len() {

@@ -20,7 +20,8 @@
 //! - `chart.rs`: stage 1. UV islands (triangles connected through shared vertex indices) of
 //!   each textured submesh, mapped through KHR_texture_transform into the source's texel space;
 //!   each island's chart is its bounding box widened to whole texels; overlapping charts of one
-//!   material merge. Untextured materials (and submeshes without UVs) share one flat patch per
+//!   material merge, and so do all the charts of one texture when they fill at least half of
+//!   their union (a texture laid out as tiles is copied whole, with one gutter). Untextured materials (and submeshes without UVs) share one flat patch per
 //!   material.
 //! - `layout.rs`: [`Layout`] (rectangles plus gutters) and its invariants, checked by
 //!   [`Layout::validate`].

@@ -151,6 +151,44 @@ fn overlapping_islands_of_one_texture_merge() {
 }
 
 #[test]
+fn tiles_that_fill_a_texture_share_one_chart_and_scattered_islands_do_not() {
+    // Two disjoint quads over the left and right halves of an 8x8 texture (a box proxy's faces
+    // side by side) fill their union: one 8x8 chart, one gutter.
+    let tex = gradient(8, 8);
+    let tiled = mesh(
+        vec![
+            quad(box_uvs(Vec2::ZERO, Vec2::new(0.5, 1.0)), Some(0)),
+            quad(box_uvs(Vec2::new(0.5, 0.0), Vec2::ONE), Some(0)),
+        ],
+        vec![material(Vec4::ONE, Some(0), AlphaMode::Opaque)],
+        vec![png_texture(&tex, Wrap::Repeat)],
+    );
+    let (out, report, atlas) = atlased(&tiled, &AtlasOptions::default());
+    assert_eq!(report.charts, 1);
+    assert_eq!((report.width, report.height), (12, 12));
+    // Each quad still samples its own texels: a point 0.6 of the way across it lands on the
+    // source texel under the same point.
+    for s in 0..2 {
+        let uvs = out.submeshes[s].uvs.as_ref().expect("uvs");
+        let inside = uvs[0] + (uvs[2] - uvs[0]) * 0.6;
+        let source = Vec2::new(0.5 * s as f32 + 0.3, 0.6) * 8.0;
+        let want = tex.get_pixel(source.x as u32, source.y as u32);
+        assert_eq!(texel_at(&atlas, inside), *want);
+    }
+    // Two one-texel islands in opposite corners fill 2 of 64 texels: two charts.
+    let scattered = mesh(
+        vec![
+            quad(box_uvs(Vec2::ZERO, Vec2::splat(0.125)), Some(0)),
+            quad(box_uvs(Vec2::splat(0.875), Vec2::ONE), Some(0)),
+        ],
+        vec![material(Vec4::ONE, Some(0), AlphaMode::Opaque)],
+        vec![png_texture(&tex, Wrap::Repeat)],
+    );
+    let (_, report, _) = atlased(&scattered, &AtlasOptions::default());
+    assert_eq!(report.charts, 2);
+}
+
+#[test]
 fn repeat_and_mirror_wrapping_quads_sample_like_the_source() {
     // UVs 0..3 on a 4x4 texture span 12x12 source texels, three tiles. Every texel centre of
     // that range, remapped through the quad (an affine map), must show the wrapped source texel.
