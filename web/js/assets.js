@@ -3,8 +3,10 @@
 // what has loaded stays in an LRU cache under a memory budget while nothing draws it.
 //
 // An asset is a GLB. Loaded, it is a list of parts: a geometry, a material and the part's
-// matrix inside the asset, ready to be instanced at any placement.
+// matrices inside the asset (several when the GLB instances it), ready to be instanced at any
+// placement.
 
+import * as THREE from 'three';
 import { GLTFLoader } from 'three/addons/loaders/GLTFLoader.js';
 import { MeshoptDecoder } from 'three/addons/libs/meshopt_decoder.module.js';
 
@@ -179,14 +181,27 @@ class AssetRecord {
   }
 }
 
-/** The meshes of a loaded glTF scene, each with its matrix within the scene. */
+/**
+ * The meshes of a loaded glTF scene, each with its matrices within the scene: one per node, or
+ * one per instance of a node instanced by EXT_mesh_gpu_instancing (an aggregate's repeated
+ * parts), which GLTFLoader reads as an InstancedMesh.
+ */
 function partsOf(scene) {
   scene.updateMatrixWorld(true);
   const parts = [];
+  const instance = new THREE.Matrix4();
   scene.traverse((node) => {
-    if (node.isMesh) {
-      parts.push({ geometry: node.geometry, material: node.material, matrix: node.matrixWorld.clone() });
+    if (!node.isMesh) return;
+    const matrices = [];
+    if (node.isInstancedMesh) {
+      for (let i = 0; i < node.count; i++) {
+        node.getMatrixAt(i, instance);
+        matrices.push(new THREE.Matrix4().multiplyMatrices(node.matrixWorld, instance));
+      }
+    } else {
+      matrices.push(node.matrixWorld.clone());
     }
+    parts.push({ geometry: node.geometry, material: node.material, matrices });
   });
   return parts;
 }

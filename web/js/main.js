@@ -2,7 +2,7 @@
 // standing query, draws it with load before drop, and shows what it costs.
 //
 // Query parameters: `min_solid_angle` (default 0.001 sr), `max_entries` (default 4000),
-// `cache_mb` (default 768), and `full`: draw every object as its model instead of the cut
+// `cache_mb` (default 768), `antialias=0` (cheaper in software rendering), and `full`: draw every object as its model instead of the cut
 // (the reference the fidelity test compares with).
 //
 // `window.horizon` is the surface tests and tools read (DESIGN.md, "Outputs that tools parse").
@@ -20,6 +20,7 @@ const MIN_SOLID_ANGLE = Number(params.get('min_solid_angle') || 0.001);
 const MAX_ENTRIES = Number(params.get('max_entries') || 4000);
 const CACHE_MB = Number(params.get('cache_mb') || 768);
 const FULL = params.has('full');
+const ANTIALIAS = params.get('antialias') !== '0';
 const FOV = 60;
 
 const $ = (id) => document.getElementById(id);
@@ -33,7 +34,7 @@ function say(text, isError = false) {
 }
 
 // Stage 1: renderer, scene and camera.
-const renderer = new THREE.WebGLRenderer({ canvas, antialias: true, logarithmicDepthBuffer: true, preserveDrawingBuffer: true });
+const renderer = new THREE.WebGLRenderer({ canvas, antialias: ANTIALIAS, logarithmicDepthBuffer: true, preserveDrawingBuffer: true });
 renderer.setPixelRatio(Math.min(devicePixelRatio, 2));
 renderer.info.autoReset = true;
 const scene = new THREE.Scene();
@@ -115,7 +116,26 @@ window.horizon = {
   get failures() { return world.failures; },
   get message() { return messageBox.textContent; },
   get message_is_error() { return messageBox.className === 'error'; },
+  /** Nothing to load or fade: the frame is what the cut the viewer holds draws. */
+  get settled() {
+    return world.complete && world.pendingAssets === 0 && world.transitions === 0;
+  },
+  /** The view the viewer asks for now (the body of a `view` message, without its id). */
+  view() { return view(); },
   setView(eye, target) { fly.lookAt(eye, target); },
+  /** The last frame's pixels, RGBA rows from the top, base64. */
+  pixels() {
+    renderer.render(scene, camera);
+    const copy = document.createElement('canvas');
+    copy.width = canvas.width;
+    copy.height = canvas.height;
+    const context = copy.getContext('2d');
+    context.drawImage(canvas, 0, 0);
+    const data = context.getImageData(0, 0, copy.width, copy.height).data;
+    let text = '';
+    for (let i = 0; i < data.length; i += 0x8000) text += String.fromCharCode.apply(null, data.subarray(i, i + 0x8000));
+    return { width: copy.width, height: copy.height, b64: btoa(text) };
+  },
   place(file, x, y) { return upload.place(file, x, y); },
   ids() { return [...world.current]; },
 };

@@ -201,10 +201,12 @@ export class World {
             c.depthWrite = false;
             return c;
           });
-          const mesh = new THREE.Mesh(part.geometry, materials.length === 1 ? materials[0] : materials);
-          mesh.matrixAutoUpdate = false;
-          mesh.matrix.multiplyMatrices(placement, part.matrix);
-          e.fadeGroup.add(mesh);
+          for (const matrix of part.matrices) {
+            const mesh = new THREE.Mesh(part.geometry, materials.length === 1 ? materials[0] : materials);
+            mesh.matrixAutoUpdate = false;
+            mesh.matrix.multiplyMatrices(placement, matrix);
+            e.fadeGroup.add(mesh);
+          }
         }
       }
     }
@@ -251,7 +253,10 @@ export class World {
     if (this.dirty) this.rebuild();
   }
 
-  /** One InstancedMesh per (asset, part, mirrored) over every shown or retiring entry. */
+  /**
+   * One InstancedMesh per (asset, part, handedness) over every shown or retiring entry: each
+   * placement times each of the part's own matrices, mirrored ones under the mirror.
+   */
   rebuild() {
     this.dirty = false;
     for (const mesh of this.batches.values()) {
@@ -263,29 +268,28 @@ export class World {
     for (const e of this.entries.values()) {
       if (!e.visible || e.state === 'fading') continue;
       for (const [hash, record] of e.loaded) {
-        for (const placement of e.placementsOf(hash)) {
-          const mirrored = placement.determinant() < 0;
-          const key = `${hash}|${mirrored ? 'm' : 'p'}`;
-          let g = groups.get(key);
-          if (!g) groups.set(key, (g = { record, mirrored, matrices: [] }));
-          g.matrices.push(placement);
-        }
+        record.parts.forEach((part, p) => {
+          for (const placement of e.placementsOf(hash)) {
+            for (const inside of part.matrices) {
+              const m = new THREE.Matrix4().multiplyMatrices(placement, inside);
+              const mirrored = m.determinant() < 0;
+              if (mirrored) m.premultiply(MIRROR);
+              const key = `${hash}|${p}|${mirrored ? 'm' : 'p'}`;
+              let g = groups.get(key);
+              if (!g) groups.set(key, (g = { part, mirrored, matrices: [] }));
+              g.matrices.push(m);
+            }
+          }
+        });
       }
     }
-    const scratch = new THREE.Matrix4();
     for (const [key, g] of groups) {
-      g.record.parts.forEach((part, p) => {
-        const mesh = new THREE.InstancedMesh(part.geometry, part.material, g.matrices.length);
-        g.matrices.forEach((m, i) => {
-          scratch.multiplyMatrices(m, part.matrix);
-          if (g.mirrored) scratch.premultiply(MIRROR);
-          mesh.setMatrixAt(i, scratch);
-        });
-        mesh.instanceMatrix.needsUpdate = true;
-        mesh.computeBoundingSphere();
-        (g.mirrored ? this.mirrored : this.root).add(mesh);
-        this.batches.set(`${key}|${p}`, mesh);
-      });
+      const mesh = new THREE.InstancedMesh(g.part.geometry, g.part.material, g.matrices.length);
+      g.matrices.forEach((m, i) => mesh.setMatrixAt(i, m));
+      mesh.instanceMatrix.needsUpdate = true;
+      mesh.computeBoundingSphere();
+      (g.mirrored ? this.mirrored : this.root).add(mesh);
+      this.batches.set(key, mesh);
     }
   }
 
@@ -308,6 +312,13 @@ export class World {
       if (e.replaces.length === 0 || standIns.length !== e.replaces.length) return false;
     }
     return covers === this.objects;
+  }
+
+  /** Entries retiring or fading: the view is changing over. */
+  get transitions() {
+    let n = 0;
+    for (const e of this.entries.values()) if (e.state === 'retiring' || e.state === 'fading') n++;
+    return n;
   }
 
   /** Assets the current cut still waits for. */

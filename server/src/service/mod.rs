@@ -255,6 +255,7 @@ pub fn app(state: AppState) -> Router {
     let (router, _) = routes::router().split_for_parts();
     let timeout = state.config().request_timeout;
     router
+        .route("/web/{*path}", axum::routing::get(routes::web::file))
         .fallback(routes::meta::not_found)
         .method_not_allowed_fallback(routes::meta::method_not_allowed)
         .with_state(state.clone())

@@ -1,8 +1,8 @@
-//! Health, metrics, the OpenAPI document, the index page and the 404 of unknown routes.
+//! Health, metrics, the OpenAPI document and the 404 of unknown routes.
 
 use axum::extract::State;
 use axum::http::header::CONTENT_TYPE;
-use axum::response::{Html, IntoResponse};
+use axum::response::IntoResponse;
 use axum::Json;
 use horizon_protocol::ErrorCode;
 use utoipa::OpenApi;
@@ -55,30 +55,6 @@ pub async fn openapi() -> Json<utoipa::openapi::OpenApi> {
     Json(document())
 }
 
-/// What the service is, with links to the API.
-#[utoipa::path(get, path = "/", tag = "service",
-    responses((status = 200, description = "The index page", content_type = "text/html")))]
-pub async fn index() -> Html<&'static str> {
-    Html(INDEX)
-}
-
-const INDEX: &str = r#"<!doctype html>
-<html lang="en"><head><meta charset="utf-8"><title>Horizon</title></head>
-<body style="font-family: sans-serif; max-width: 40em; margin: 3em auto">
-<h1>Horizon</h1>
-<p>A world server for large user-generated 3D worlds. Upload models, place them as objects,
-ask for everything that subtends a solid angle from where you are, and fetch immutable,
-content-addressed assets.</p>
-<ul>
-<li><a href="/v1/world">/v1/world</a>: the world's generation, size and rebuild state</li>
-<li><a href="/v1/models">/v1/models</a> and <a href="/v1/objects">/v1/objects</a>: its contents, a page at a time</li>
-<li><a href="/v1/cut?eye=0,2,0">/v1/cut?eye=x,y,z</a>: the cut from a point (<code>min_solid_angle</code>, <code>max_entries</code>, <code>max_bytes</code>, ...)</li>
-<li><code>/v1/stream</code>: the same cut kept up to date over WebSocket</li>
-<li><a href="/v1/openapi.json">/v1/openapi.json</a>: every route</li>
-<li><a href="/metrics">/metrics</a>, <a href="/healthz">/healthz</a></li>
-</ul>
-</body></html>
-"#;
 
 /// Any route the service does not have.
 pub async fn not_found() -> AppError {

@@ -6,6 +6,7 @@ pub mod cut;
 pub mod meta;
 pub mod models;
 pub mod objects;
+pub mod web;
 pub mod world;
 
 use axum::extract::{FromRequest, FromRequestParts, Request};
@@ -24,7 +25,7 @@ pub fn router() -> OpenApiRouter<AppState> {
         .routes(routes!(meta::health))
         .routes(routes!(meta::metrics_text))
         .routes(routes!(meta::openapi))
-        .routes(routes!(meta::index))
+        .routes(routes!(web::index))
         .routes(routes!(world::info))
         .routes(routes!(models::upload, models::list))
         .routes(routes!(models::get))
