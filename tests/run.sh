@@ -6,7 +6,9 @@
 #   3. cargo test over the workspace (unit, integration and property tests), then the kill test
 #      (horizon serve SIGKILLed at random under mutations; every acknowledged one survives);
 #   4. the reference checks in tests/reference against third-party tools: the Khronos
-#      glTF-Validator (npm gltf-validator), trimesh, and an independent glTF reading in numpy.
+#      glTF-Validator (npm gltf-validator), trimesh, and an independent glTF reading in numpy;
+#   5. the web viewer in headless Chromium (tests/web: playwright-core and Debian's chromium,
+#      installed here when missing) against a real horizon serve.
 # The Python venv (trimesh, fast-simplification, pymeshlab, point-cloud-utils) and the npm
 # validator are installed once under $HORIZON_TOOLS (default ~/.cache/horizon-tools).
 set -euo pipefail
@@ -27,6 +29,17 @@ fi
 if [ ! -d "$tools/npm/node_modules/gltf-validator" ]; then
   mkdir -p "$tools/npm"
   (cd "$tools/npm" && npm init -y >/dev/null && npm install --silent --no-audit --no-fund gltf-validator@2.0.0-dev.3.10 >/dev/null)
+fi
+if [ ! -d "$tools/npm/node_modules/playwright-core" ]; then
+  (cd "$tools/npm" && npm install --silent --no-audit --no-fund playwright-core@1 >/dev/null)
+fi
+# The browser tests drive Debian's Chromium.
+chromium="${CHROMIUM:-/usr/bin/chromium}"
+if [ ! -x "$chromium" ]; then
+  sudo_=""
+  [ "$(id -u)" -ne 0 ] && sudo_="sudo"
+  $sudo_ apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $sudo_ apt-get install -y -qq chromium >/dev/null
 fi
 
 step "format and lints"
@@ -62,3 +75,7 @@ GLTF_VALIDATOR_DIR="$tools/npm" "$tools/venv/bin/python" tests/reference/check_s
   target/release/horizon tests/reference/validate.mjs
 GLTF_VALIDATOR_DIR="$tools/npm" "$tools/venv/bin/python" tests/reference/check_aggregates.py \
   target/release/horizon tests/reference/validate.mjs
+
+step "the web viewer in headless Chromium (tests/web)"
+HORIZON=target/release/horizon PLAYWRIGHT_CORE="$tools/npm/node_modules/playwright-core" \
+  CHROMIUM="$chromium" node --test tests/web/

@@ -44,6 +44,7 @@ fn serve_world(world: World, listen: SocketAddr) -> anyhow::Result<()> {
         let bound = listener.local_addr()?;
         outln!("listening on http://{bound}")?;
         std::io::stdout().flush()?;
+        eprintln!("horizon: open http://{bound}/ in a browser to fly the world");
         tracing::info!(%bound, dir = %world.root().display(), "serving");
         let state = AppState::new(world, Config::default());
         service::run(listener, state, service::shutdown_signal()).await?;

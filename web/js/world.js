@@ -39,6 +39,7 @@ export class World {
     this.root.add(this.mirrored);
     this.scene.add(this.root);
     this.failures = 0;
+    this.changed = false;
   }
 
   /** A reset: the whole cut anew. What was drawn stays until all of it has loaded. */
@@ -64,7 +65,11 @@ export class World {
   applyDelta(message) {
     this.header(message);
     const added = message.add.map((data) => this.add(data, data.replaces || []));
+    // An id both removed and added is the same content with new counts (an aggregate whose
+    // `covers` changed when an object went pending): it was updated in place.
+    const again = new Set(message.add.map((a) => a.id));
     for (const { id, reason } of message.remove) {
+      if (again.has(id)) continue;
       const e = this.entries.get(id);
       this.current.delete(id);
       if (!e) continue;
@@ -96,8 +101,12 @@ export class World {
   add(data, replaces) {
     const existing = this.entries.get(data.id);
     if (existing && existing.state !== 'fading') {
-      // The same content came back while it was retiring: it is simply current again.
-      existing.state = existing.visible ? 'shown' : existing.state;
+      // The same content, still held (its counts may have changed) or retiring: it is simply
+      // current again, with the new counts.
+      existing.data = data;
+      existing.center = data.center;
+      existing.radius = data.radius;
+      if (existing.state === 'retiring') existing.state = 'shown';
       existing.replacers = new Set();
       existing.replaces = [];
       this.current.add(data.id);
@@ -232,15 +241,23 @@ export class World {
     }
     for (const hash of e.hashes) this.assets.release(hash, e);
     if (this.entries.get(e.id) === e) this.entries.delete(e.id);
-    if (e.visible) this.dirty = true;
+    // A fading entry is already out of the batches; the picture changes all the same.
+    if (e.visible && e.state !== 'fading') this.dirty = true;
+    this.changed = true;
     e.visible = false;
     e.state = 'gone';
   }
 
-  /** Per frame: fades advance, finished fades go, batches are rebuilt if anything changed. */
+  /**
+   * Per frame: fades advance, finished fades go, batches are rebuilt if anything changed.
+   * Returns whether the picture changed since the last call.
+   */
   frame(now) {
+    let changed = this.changed;
+    this.changed = false;
     for (const e of [...this.entries.values()]) {
       if (e.state !== 'fading') continue;
+      changed = true;
       const t = (now - e.fadeStart) / FADE_MS;
       if (t >= 1) {
         this.dispose(e);
@@ -250,7 +267,11 @@ export class World {
         if (m.isMesh) (Array.isArray(m.material) ? m.material : [m.material]).forEach((x) => (x.opacity = 1 - t));
       });
     }
-    if (this.dirty) this.rebuild();
+    if (this.dirty) {
+      this.rebuild();
+      changed = true;
+    }
+    return changed;
   }
 
   /**
