@@ -94,9 +94,11 @@ test('no holes while moving: every frame of a seeded flight draws every object',
     await page.waitForFunction((f) => window.horizon.frames >= f + 2, frames, { timeout: 60000 });
   }
   await settled(page);
-  const s = await page.evaluate(() => ({ frames: window.horizon.frames, bad: window.horizon.incomplete_frames }));
+  const s = await page.evaluate(() => ({
+    frames: window.horizon.frames, bad: window.horizon.incomplete_frames, why: window.horizon.incomplete_why,
+  }));
   assert.ok(s.frames > 2 * steps, `only ${s.frames} frames`);
-  assert.equal(s.bad, 0, `${s.bad} of ${s.frames} frames left objects undrawn`);
+  assert.equal(s.bad, 0, `${s.bad} of ${s.frames} frames left objects undrawn; the last: ${s.why}`);
   assert.deepEqual(page.errors, []);
 });
 

@@ -106,6 +106,8 @@ window.horizon = {
   get bytes() { return assets.bytesReceived; },
   get frames() { return stats.frames; },
   get incomplete_frames() { return stats.incompleteFrames; },
+  /** Why the last incomplete frame was incomplete. */
+  get incomplete_why() { return stats.incompleteWhy ?? null; },
   get first_complete_ms() { return stats.firstCompleteMs; },
   get latency_ms() { return stream ? stream.latencyMs : null; },
   get draw_calls() { return stats.drawCalls; },
@@ -181,6 +183,7 @@ function frame(now) {
     $('progress').classList.add('done');
   } else if (!complete && stats.firstCompleteMs !== null) {
     stats.incompleteFrames++;
+    stats.incompleteWhy = world.incompleteBecause();
   }
   if (now - hudAt > 250) {
     hudAt = now;

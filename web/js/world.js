@@ -149,6 +149,8 @@ export class World {
 
   /** `e` goes without ever having been drawn: what it was to replace waits for `replacers`. */
   handOn(e, replacers) {
+    // Its replacers no longer wait on it: it will never be drawn.
+    for (const a of replacers) a.replaces = a.replaces.filter((id) => id !== e.id);
     for (const old of this.entries.values()) {
       if (old.state !== 'retiring' || !old.replacers.has(e.id)) continue;
       old.replacers.delete(e.id);
@@ -320,19 +322,26 @@ export class World {
    * `covers` add up to the world's objects. Fading entries do not count.
    */
   get complete() {
-    if (this.generation === null) return false;
+    return this.incompleteBecause() === null;
+  }
+
+  /** Why the view is not complete, in words; null when it is. */
+  incompleteBecause() {
+    if (this.generation === null) return 'no cut yet';
     let covers = 0;
     for (const id of this.current) {
       const e = this.entries.get(id);
       covers += e.data.covers;
       if (e.state === 'shown') continue;
-      const standIns = e.replaces.filter((r) => {
+      if (e.replaces.length === 0) return `${id} is ${e.state} and replaces nothing drawn`;
+      for (const r of e.replaces) {
         const old = this.entries.get(r);
-        return old && old.state === 'retiring' && old.visible;
-      });
-      if (e.replaces.length === 0 || standIns.length !== e.replaces.length) return false;
+        if (!old || old.state !== 'retiring' || !old.visible) {
+          return `${id} is ${e.state} and ${r}, which it replaces, is ${old ? old.state : 'gone'}`;
+        }
+      }
     }
-    return covers === this.objects;
+    return covers === this.objects ? null : `covers add up to ${covers}, not ${this.objects}`;
   }
 
   /** Entries retiring or fading: the view is changing over. */

@@ -55,7 +55,6 @@ pub async fn openapi() -> Json<utoipa::openapi::OpenApi> {
     Json(document())
 }
 
-
 /// Any route the service does not have.
 pub async fn not_found() -> AppError {
     AppError::new(ErrorCode::NotFound, "no such route")
