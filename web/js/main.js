@@ -120,13 +120,15 @@ window.horizon = {
   get message_is_error() { return messageBox.className === 'error'; },
   /** Nothing to load or fade: the frame is what the cut the viewer holds draws. */
   get settled() {
-    return world.complete && world.pendingAssets === 0 && world.transitions === 0;
+    return world.complete && world.pendingAssets === 0 && world.transitions === 0 && !world.dirty;
   },
   /** The view the viewer asks for now (the body of a `view` message, without its id). */
   view() { return view(); },
   setView(eye, target) { fly.lookAt(eye, target); },
   /** The last frame's pixels, RGBA rows from the top, base64. */
   pixels() {
+    // Batches rebuilt since the last animation frame are drawn too.
+    world.frame(performance.now());
     renderer.render(scene, camera);
     const copy = document.createElement('canvas');
     copy.width = canvas.width;
