@@ -27,7 +27,7 @@ use std::collections::{BTreeMap, HashMap};
 use std::sync::Arc;
 
 use glam::{Affine3A, Vec2, Vec3, Vec4};
-use horizon_impostor::{PreparedMesh, SceneBuilder};
+use horizon_impostor::{to_srgb, PreparedMesh, SceneBuilder};
 use horizon_mesh::{Instance, InstancedMesh, Material, Submesh, Texture, TextureRef, Wrap};
 
 use crate::budget::Display;
@@ -335,7 +335,7 @@ fn box_proxy(source: &SourceModel, texel: f32) -> Option<(Submesh, Texture)> {
             for x in 0..w + 2 {
                 let (tx, ty) = (x.clamp(1, *w) - 1, y.clamp(1, *h) - 1);
                 let c = texels[(ty * w + tx) as usize];
-                let [r, g, b] = srgb(c);
+                let [r, g, b] = to_srgb(c.truncate());
                 image.put_pixel(x0 + x, y, image::Rgba([r, g, b, 255]));
             }
         }
@@ -417,19 +417,6 @@ fn fill_misses(texels: Vec<Option<Vec4>>) -> Vec<Vec4> {
         hits.iter().copied().sum::<Vec4>() / hits.len() as f32
     };
     texels.into_iter().map(|t| t.unwrap_or(mean)).collect()
-}
-
-/// Linear colour to sRGB bytes.
-fn srgb(c: Vec4) -> [u8; 3] {
-    c.truncate().to_array().map(|v| {
-        let v = v.clamp(0.0, 1.0);
-        let s = if v <= 0.003_130_8 {
-            12.92 * v
-        } else {
-            1.055 * v.powf(1.0 / 2.4) - 0.055
-        };
-        (s * 255.0).round() as u8
-    })
 }
 
 #[cfg(test)]

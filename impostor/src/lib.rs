@@ -20,3 +20,4 @@ pub use camera::Camera;
 pub use compare::{compare, Comparison};
 pub use frame::Frame;
 pub use scene::{PreparedMesh, Scene, SceneBuilder, Surface};
+pub use shade::to_srgb;
