@@ -54,7 +54,7 @@ export class World {
       if (e.visible) {
         this.retire(e, added);
       } else {
-        this.forget(e);
+        this.dispose(e);
       }
     }
     for (const a of added) a.replaces = old.filter((id) => this.entries.get(id)?.state === 'retiring');
@@ -80,10 +80,10 @@ export class World {
       if (reason === 'deleted' || replacers.length === 0) {
         // A deleted object goes at once, as does anything nothing replaces.
         this.handOn(e, []);
-        this.drop(e);
+        this.dispose(e);
       } else if (!e.visible) {
         this.handOn(e, replacers);
-        this.forget(e);
+        this.dispose(e);
       } else {
         this.retire(e, replacers);
       }
@@ -195,7 +195,7 @@ export class World {
 
   fade(e) {
     if (!e.visible) {
-      this.forget(e);
+      this.dispose(e);
       return;
     }
     e.state = 'fading';
@@ -222,15 +222,6 @@ export class World {
       }
     }
     this.root.add(e.fadeGroup);
-  }
-
-  drop(e) {
-    this.dispose(e);
-    this.dirty = true;
-  }
-
-  forget(e) {
-    this.dispose(e);
   }
 
   dispose(e) {
