@@ -1,0 +1,337 @@
+//! Levels of detail per model (issue 28; the progressive models of Terrace et al., ICME 2012,
+//! and the progressive texture maps of Marvie and Bouatouch 2003, as one chain of static
+//! levels): every model gets a chain of coarser versions of itself, each served as its own
+//! content-addressed GLB, so a cut can send an object at the detail its pixels need.
+//!
+//! [`build_chain`] runs, from the model as stored (level 0), a loop of named stages:
+//! 1. **geometry**: instance-aware simplification (`horizon_simplify::simplify`; on a model
+//!    whose parts are each placed once it is the plain quadric simplifier) to about
+//!    [`LevelOptions::ratio`] of the previous level's triangles, never below
+//!    [`LevelOptions::floor_triangles`]; a simplification that keeps more than
+//!    [`LevelOptions::stall`] of its input, or that drops whole parts holding more than
+//!    [`DROPPED_AREA`] of its area, has stalled (seams and materials hold it), and the
+//!    geometry stays as it was from then on;
+//! 2. **textures**: every texture longer than [`LevelOptions::min_texture_side`] halved (a
+//!    box-filtered mip level), re-encoded in its own format;
+//! 3. **measure**: the symmetric Hausdorff distance to level 0 (Metro sampling,
+//!    `horizon_simplify::distance`), in model units, kept monotone along the chain (a level
+//!    is at least as far from the model as the one before it); the texel density (texels per
+//!    model unit, over the textured surface);
+//! 4. **encode**: the GLB a client downloads, written as aggregates are (instances in
+//!    EXT_mesh_gpu_instancing, short normals, UVs and rotations, 16-bit positions wherever
+//!    they stay within [`QUANTIZATION_SHARE`] of the level's error); a level that saves less
+//!    than [`LevelOptions::min_saving`] of the previous level's bytes ends the chain.
+//!
+//! The chain ends when neither geometry nor textures can be reduced. Geometry and texture
+//! reductions go together, one level for both: a level is one GLB.
+
+use glam::Vec2;
+use horizon_mesh::{export_glb, ExportOptions, InstancedMesh, Texture};
+use horizon_simplify::distance::{hausdorff_instanced, DistanceOptions};
+use horizon_simplify::{simplify, SimplifyOptions, Target};
+use serde::{Deserialize, Serialize};
+
+/// Quantized positions stay within this share of their level's error of where floats put
+/// them.
+pub const QUANTIZATION_SHARE: f64 = 0.25;
+
+/// A simplification that removes whole parts holding more than this share of the model's
+/// area has not simplified the model but dropped what shows: it counts as stalled.
+pub const DROPPED_AREA: f64 = 0.01;
+
+/// A geometry step is taken with the texture step unless it makes the level usable only at
+/// more than this multiple of the distance the texture step alone would: then the level
+/// halves the textures alone, and the geometry waits.
+pub const GEOMETRY_LEAD: f64 = 2.0;
+
+/// How a chain is built. The defaults are the product's.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LevelOptions {
+    /// Each level's triangles as a share of the level before it.
+    pub ratio: f64,
+    /// No level has fewer triangles than this (unless the model has).
+    pub floor_triangles: u64,
+    /// A simplification that keeps more than this share of its input has stalled.
+    pub stall: f64,
+    /// Textures are not halved below this many texels along their longer side.
+    pub min_texture_side: u32,
+    /// A level must save this share of the previous level's bytes, or the chain ends.
+    pub min_saving: f64,
+    /// Face samples per direction of the Hausdorff distance.
+    pub distance_samples: usize,
+    /// The most coarser levels (besides level 0).
+    pub max_levels: usize,
+}
+
+impl Default for LevelOptions {
+    fn default() -> Self {
+        Self {
+            ratio: 0.25,
+            floor_triangles: 64,
+            stall: 0.75,
+            min_texture_side: 16,
+            min_saving: 0.2,
+            distance_samples: 20_000,
+            max_levels: 8,
+        }
+    }
+}
+
+/// One level of a chain, as stored and served.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Level {
+    /// The level's GLB.
+    pub glb: Vec<u8>,
+    /// What it costs and how far it is from the model.
+    pub info: LevelInfo,
+}
+
+/// What a level is, without its bytes: what a cut chooses by.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct LevelInfo {
+    /// Symmetric Hausdorff distance to the model (level 0), model units.
+    pub error: f64,
+    /// Triangles drawn, instances expanded.
+    pub triangles: u64,
+    /// Draw calls: one per submesh.
+    pub submeshes: u64,
+    /// Bytes of its GLB.
+    pub bytes: u64,
+    /// Texels per model unit over the textured surface; `None` without textures.
+    pub texel_density: Option<f64>,
+}
+
+/// A model's coarser levels (level 0 is the model itself, described by [`level_zero`]).
+#[derive(Clone, Debug, Default)]
+pub struct Chain {
+    /// Levels 1, 2, ...: errors rise, triangles and bytes fall.
+    pub levels: Vec<Level>,
+    /// Why the chain stopped before it reached its floor, when something failed (the model
+    /// keeps the levels made before the failure, or its full level alone).
+    pub failure: Option<String>,
+}
+
+/// Level 0's figures: the model as stored, `bytes` long.
+pub fn level_zero(mesh: &InstancedMesh, bytes: u64) -> LevelInfo {
+    LevelInfo {
+        error: 0.0,
+        triangles: mesh.expanded_triangle_count(),
+        submeshes: mesh.submeshes.len() as u64,
+        bytes,
+        texel_density: texel_density(mesh),
+    }
+}
+
+/// The chain of coarser levels of `model` (see the module docs). `bytes` is the size of the
+/// model's own stored GLB (level 0).
+pub fn build_chain(model: &InstancedMesh, bytes: u64, options: &LevelOptions) -> Chain {
+    let mut chain = Chain::default();
+    let mut previous: Option<InstancedMesh> = None;
+    let mut previous_info = level_zero(model, bytes);
+    let mut geometry_done = previous_info.triangles <= options.floor_triangles;
+    let mut textures_done = false;
+    let diagonal = model.bounds().diagonal();
+    let distance = DistanceOptions {
+        samples: options.distance_samples,
+        seed: 0,
+    };
+    while chain.levels.len() < options.max_levels {
+        let from = previous.as_ref().unwrap_or(model);
+        // Stage 1: geometry, measured.
+        let mut simplified = None;
+        if !geometry_done {
+            let triangles = from.expanded_triangle_count();
+            let target =
+                ((triangles as f64 * options.ratio).round() as u64).max(options.floor_triangles);
+            match simplify(
+                from,
+                Target::Triangles(target),
+                &SimplifyOptions::balanced(),
+            ) {
+                Ok(s)
+                    if (s.report.triangles_out as f64) <= options.stall * triangles as f64
+                        && dropped_area(from, &s.kept) <= DROPPED_AREA =>
+                {
+                    match hausdorff_instanced(model, &s.mesh, &distance) {
+                        Ok(r) => simplified = Some((s.mesh, r.hausdorff.max(previous_info.error))),
+                        Err(e) => {
+                            chain.failure =
+                                Some(format!("the level's error could not be measured: {e}"));
+                            break;
+                        }
+                    }
+                }
+                Ok(_) => geometry_done = true,
+                Err(e) => {
+                    chain.failure = Some(format!("simplification failed: {e}"));
+                    break;
+                }
+            }
+        }
+        // Stage 2: textures.
+        let mut textures = from.textures.clone();
+        if textures_done {
+            textures.clear();
+        }
+        let halved = match halve_textures(&mut textures, options.min_texture_side) {
+            Ok(halved) => halved && !textures_done,
+            Err(e) => {
+                chain.failure = Some(format!("a texture could not be resampled: {e}"));
+                break;
+            }
+        };
+        let mut geometry_step = false;
+        // Stage 3: choose. The geometry step is taken unless its error would make the level
+        // usable only much farther away than the halved textures alone would.
+        let density = previous_info
+            .texel_density
+            .map(|d| if halved { d * 0.5 } else { d });
+        let footprint = |error: f64| error.max(density.map_or(0.0, |d| 1.0 / d));
+        let (mut mesh, error) = match simplified {
+            Some((mesh, error))
+                if !halved
+                    || footprint(error) <= GEOMETRY_LEAD * footprint(previous_info.error) =>
+            {
+                geometry_done = mesh.expanded_triangle_count() <= options.floor_triangles;
+                geometry_step = true;
+                (mesh, error)
+            }
+            _ if halved => (from.clone(), previous_info.error),
+            _ => break,
+        };
+        if !textures_done {
+            mesh.textures = textures;
+        }
+        // Stage 4: encode.
+        let tolerance = (QUANTIZATION_SHARE * error).max(1e-5 * f64::from(diagonal)) as f32;
+        let glb = match export_glb(&mesh, &ExportOptions::aggregate(tolerance)) {
+            Ok(glb) => glb,
+            Err(e) => {
+                chain.failure = Some(format!("the level could not be written: {e}"));
+                break;
+            }
+        };
+        if glb.len() as f64 > (1.0 - options.min_saving) * previous_info.bytes as f64 {
+            if geometry_step || geometry_done {
+                break;
+            }
+            // Halving the textures no longer pays: the geometry goes on alone.
+            textures_done = true;
+            continue;
+        }
+        let info = LevelInfo {
+            error,
+            triangles: mesh.expanded_triangle_count(),
+            submeshes: mesh.submeshes.len() as u64,
+            bytes: glb.len() as u64,
+            texel_density: texel_density(&mesh),
+        };
+        previous_info = info.clone();
+        chain.levels.push(Level { glb, info });
+        previous = Some(mesh);
+    }
+    chain
+}
+
+/// The share of `mesh`'s surface area in the submeshes that `kept` says lost all their
+/// triangles.
+fn dropped_area(mesh: &InstancedMesh, kept: &[Option<usize>]) -> f64 {
+    let mut areas = vec![0.0f64; mesh.submeshes.len()];
+    for inst in &mesh.instances {
+        let sub = &mesh.submeshes[inst.submesh];
+        for t in sub.indices.chunks_exact(3) {
+            let [a, b, c] = [0, 1, 2].map(|i| {
+                inst.transform
+                    .transform_point3(sub.positions[t[i] as usize])
+            });
+            let area = f64::from((b - a).cross(c - a).length()) * 0.5;
+            if area.is_finite() {
+                areas[inst.submesh] += area;
+            }
+        }
+    }
+    let total: f64 = areas.iter().sum();
+    let dropped: f64 = areas
+        .iter()
+        .zip(kept)
+        .filter(|(_, k)| k.is_none())
+        .map(|(a, _)| a)
+        .sum();
+    if total > 0.0 {
+        dropped / total
+    } else {
+        0.0
+    }
+}
+
+/// Halves every texture longer than `min_side` (box filter, same encoding). Returns whether
+/// any was.
+fn halve_textures(textures: &mut [Texture], min_side: u32) -> Result<bool, image::ImageError> {
+    let mut any = false;
+    for texture in textures {
+        let (w, h) = texture.size;
+        if w.max(h) <= min_side {
+            continue;
+        }
+        *texture = halved(texture)?;
+        any = true;
+    }
+    Ok(any)
+}
+
+/// A texture at half its size along both sides (at least one texel).
+fn halved(texture: &Texture) -> Result<Texture, image::ImageError> {
+    let image = texture.decode()?;
+    let (w, h) = ((image.width() / 2).max(1), (image.height() / 2).max(1));
+    let small = image::imageops::resize(&image, w, h, image::imageops::FilterType::Triangle);
+    let mut bytes = Vec::new();
+    let mut out = std::io::Cursor::new(&mut bytes);
+    if texture.mime_type == "image/jpeg" {
+        let rgb = image::DynamicImage::ImageRgba8(small).to_rgb8();
+        image::codecs::jpeg::JpegEncoder::new_with_quality(&mut out, 85).encode_image(&rgb)?;
+    } else {
+        small.write_to(&mut out, image::ImageFormat::Png)?;
+    }
+    Ok(Texture {
+        bytes,
+        mime_type: texture.mime_type.clone(),
+        size: (w, h),
+        wrap_u: texture.wrap_u,
+        wrap_v: texture.wrap_v,
+    })
+}
+
+/// Texels per model unit over the textured surface: the square root of the texels its
+/// triangles cover (UV area, after any texture transform, times the texture's size) over
+/// their area in model space; `None` when nothing textured has area.
+pub fn texel_density(mesh: &InstancedMesh) -> Option<f64> {
+    let (mut texels, mut area) = (0.0f64, 0.0f64);
+    for inst in &mesh.instances {
+        let sub = &mesh.submeshes[inst.submesh];
+        let Some(material) = sub.material.and_then(|m| mesh.materials.get(m)) else {
+            continue;
+        };
+        let Some(tref) = material.base_color_texture else {
+            continue;
+        };
+        let (Some(texture), Some(uvs)) = (mesh.textures.get(tref.texture), sub.uvs.as_ref()) else {
+            continue;
+        };
+        let uv_scale = tref
+            .transform
+            .map_or(1.0, |t| f64::from((t.scale.x * t.scale.y).abs()));
+        let size = f64::from(texture.size.0) * f64::from(texture.size.1);
+        for t in sub.indices.chunks_exact(3) {
+            let [a, b, c] = [0, 1, 2].map(|i| t[i] as usize);
+            let [pa, pb, pc] = [a, b, c].map(|i| inst.transform.transform_point3(sub.positions[i]));
+            let [ua, ub, uc]: [Vec2; 3] = [a, b, c].map(|i| uvs[i]);
+            let a3 = f64::from((pb - pa).cross(pc - pa).length()) * 0.5;
+            let a2 = f64::from((ub - ua).perp_dot(uc - ua).abs()) * 0.5;
+            if a3.is_finite() && a2.is_finite() {
+                area += a3;
+                texels += a2 * uv_scale * size;
+            }
+        }
+    }
+    (area > 0.0 && texels > 0.0).then(|| (texels / area).sqrt())
+}
