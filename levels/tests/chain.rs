@@ -2,6 +2,8 @@
 //! and bytes fall; a model too small to simplify keeps its full level alone; mirrored and
 //! sheared placements keep their winding at every level.
 
+#![allow(clippy::unwrap_used)]
+
 use glam::{Affine3A, Mat3, Vec3};
 use horizon_levels::{build_chain, level_zero, texel_density, Chain, LevelOptions};
 use horizon_mesh::{
