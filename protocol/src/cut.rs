@@ -11,6 +11,10 @@ pub const DEFAULT_MIN_SOLID_ANGLE: f64 = 1e-3;
 /// 60-degree field of view.
 pub const DEFAULT_PIXEL_SOLID_ANGLE: f64 = 3.0e-7;
 
+/// The geometric error, in pixels, that an object's level of detail may show unless a view
+/// asks for another (0: every object at full detail).
+pub const DEFAULT_MAX_PIXEL_ERROR: f64 = 1.0;
+
 /// The most entries a cut holds unless a view asks for another number.
 pub const DEFAULT_MAX_ENTRIES: u64 = 4_000;
 
@@ -26,6 +30,10 @@ pub struct View {
     /// The solid angle of one screen pixel: in (0, 4 pi).
     #[serde(default = "default_pixel_solid_angle")]
     pub pixel_solid_angle: f64,
+    /// The most geometric error, in pixels of `pixel_solid_angle`, an object's level of
+    /// detail may show at its nearest point (0: full detail): at least 0.
+    #[serde(default = "default_max_pixel_error")]
+    pub max_pixel_error: f64,
     /// What the cut may cost.
     #[serde(default)]
     pub budgets: Budgets,
@@ -39,6 +47,10 @@ fn default_pixel_solid_angle() -> f64 {
     DEFAULT_PIXEL_SOLID_ANGLE
 }
 
+fn default_max_pixel_error() -> f64 {
+    DEFAULT_MAX_PIXEL_ERROR
+}
+
 /// The largest `max_entries` a view may ask for.
 pub const MAX_ENTRIES_LIMIT: u64 = 1_000_000;
 
@@ -49,6 +61,7 @@ impl View {
             eye,
             min_solid_angle: DEFAULT_MIN_SOLID_ANGLE,
             pixel_solid_angle: DEFAULT_PIXEL_SOLID_ANGLE,
+            max_pixel_error: DEFAULT_MAX_PIXEL_ERROR,
             budgets: Budgets::default(),
         }
     }
@@ -74,6 +87,12 @@ impl View {
             if !(value.is_finite() && value > 0.0 && value < sphere) {
                 return Err(format!("{name} = {value} is not in (0, 4 pi)"));
             }
+        }
+        if !(self.max_pixel_error.is_finite() && self.max_pixel_error >= 0.0) {
+            return Err(format!(
+                "max_pixel_error = {} is not a finite number of pixels, at least 0",
+                self.max_pixel_error
+            ));
         }
         let b = &self.budgets;
         for (name, value) in [
@@ -208,7 +227,9 @@ pub struct Entry {
     pub assets: Vec<Asset>,
     /// Where they are drawn (an aggregate's mesh is in world space: the identity).
     pub placements: Vec<Placement>,
-    /// The level of detail of an object's model (0: the model as uploaded).
+    /// The level of detail of an object's model (0: the model as uploaded; see the model's
+    /// `levels`): the coarsest whose error, projected at the object's nearest point, is at
+    /// most the view's `max_pixel_error` and whose textures still give a texel per pixel.
     pub level: u32,
     /// A new or moved object that the published aggregates do not hold yet.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]

@@ -3,7 +3,7 @@
 use serde::{Deserialize, Serialize};
 
 /// A stored model: its id, the asset it is served as, and what it holds.
-#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct ModelInfo {
     /// The model's id: the content hash (BLAKE3-256, 64 hex digits) of the bytes uploaded, so
@@ -29,10 +29,34 @@ pub struct ModelInfo {
     pub materials: u64,
     /// Textures.
     pub textures: u64,
+    /// Its levels of detail, level 0 (the stored GLB, `asset`) first, each coarser than the
+    /// one before; empty until the model has been levelled (`horizon build`).
+    #[serde(default)]
+    pub levels: Vec<ModelLevelInfo>,
+}
+
+/// One level of detail of a model: a GLB of its own, served at `/assets/{asset}`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+pub struct ModelLevelInfo {
+    /// 0 for the model as stored, then 1, 2, ... coarser.
+    pub level: u32,
+    /// The content hash of its GLB.
+    pub asset: String,
+    /// Bytes of its GLB.
+    pub bytes: u64,
+    /// Triangles drawn, instances expanded.
+    pub triangles: u64,
+    /// Draw calls: one per submesh.
+    pub draw_calls: u64,
+    /// Symmetric Hausdorff distance to level 0, in model units.
+    pub error: f64,
+    /// Texels per model unit over the textured surface (none without textures).
+    pub texel_density: Option<f64>,
 }
 
 /// One page of `GET /v1/models`, in id order.
-#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct ModelPage {
     /// The models of the page.

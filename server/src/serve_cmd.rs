@@ -116,6 +116,9 @@ fn build_village(dir: &Path) -> anyhow::Result<World> {
     let bar = ProgressBar::new("describing models");
     world.describe_models(&|done, total| bar.show(done, total))?;
     bar.finish();
+    let bar = ProgressBar::new("levels of detail");
+    world.level_models(&|done, total| bar.show(done, total))?;
+    bar.finish();
     note("building the BVH");
     world.build_tree(DEFAULT_MU, DEFAULT_W)?;
     let bar = ProgressBar::new("aggregates");

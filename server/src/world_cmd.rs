@@ -1,5 +1,5 @@
 //! `horizon build` and `horizon cut`: the offline path over a world directory. Build describes
-//! the models, bulk-builds the similarity-aware BVH and rebuilds every aggregate; cut answers
+//! the models, gives them their levels of detail, bulk-builds the similarity-aware BVH and rebuilds every aggregate; cut answers
 //! one solid-angle query on what was built.
 
 use std::path::Path;
@@ -24,6 +24,9 @@ struct BuildSummary {
     height: u32,
     load_seconds: f64,
     descriptor_seconds: f64,
+    /// Models given their levels of detail by this build.
+    levels_computed: usize,
+    level_seconds: f64,
     bvh_seconds: f64,
     /// The aggregate stage, unless `--bvh-only`.
     aggregates: Option<RebuildReport>,
@@ -54,6 +57,15 @@ pub fn build(
     bar.finish();
     let descriptor_seconds = t1.elapsed().as_secs_f64();
 
+    let t_levels = Instant::now();
+    let bar = ProgressBar::new("levels of detail");
+    let (levels_computed, failures) = world.level_models(&|done, total| bar.show(done, total))?;
+    bar.finish();
+    for (name, why) in &failures {
+        eprintln!("horizon: {name}: levels of detail stopped early: {why}");
+    }
+    let level_seconds = t_levels.elapsed().as_secs_f64();
+
     let t2 = Instant::now();
     note("building the BVH");
     let (objects, nodes, height) = world.build_tree(mu, w)?;
@@ -80,6 +92,8 @@ pub fn build(
         height,
         load_seconds,
         descriptor_seconds,
+        levels_computed,
+        level_seconds,
         bvh_seconds,
         aggregates,
     };
@@ -101,16 +115,18 @@ pub fn build(
 
 fn print_summary(dir: &Path, s: &BuildSummary) -> std::io::Result<()> {
     outln!(
-        "built {}: {} objects, {} models ({} described, {} reused), {} nodes, height {}; load {:.2} s, descriptors {:.2} s, bvh {:.2} s",
+        "built {}: {} objects, {} models ({} described, {} reused, {} levelled), {} nodes, height {}; load {:.2} s, descriptors {:.2} s, levels {:.2} s, bvh {:.2} s",
         dir.display(),
         s.objects,
         s.models,
         s.descriptors_computed,
         s.descriptors_reused,
+        s.levels_computed,
         s.nodes,
         s.height,
         s.load_seconds,
         s.descriptor_seconds,
+        s.level_seconds,
         s.bvh_seconds,
     )?;
     if let Some(r) = &s.aggregates {

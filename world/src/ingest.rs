@@ -1,6 +1,7 @@
 //! Ingest: how a model enters a world. Import (untrusted bytes, under [`UploadLimits`]) ->
 //! validate -> normalise (the stored form, a plain GLB named by its content hash) -> describe
-//! (the similarity descriptors the BVH and dedup compare, with the model's bounding sphere).
+//! (the similarity descriptors the BVH and dedup compare, with the model's bounding sphere)
+//! and level (its chain of coarser levels of detail, `horizon_levels`).
 //!
 //! An upload is glTF (binary, or JSON with embedded buffers) and nothing else: it is read with
 //! no folder to resolve relative URIs against, so an external or `file:` reference is refused
@@ -10,6 +11,7 @@
 use std::path::Path;
 
 use horizon_descriptors::{describe, DescriptorOptions};
+use horizon_levels::{build_chain, level_zero, Chain, LevelInfo, LevelOptions};
 use horizon_mesh::{
     export_glb, import_bytes, import_file, ExportOptions, Format, ImageCheck, ImportError,
     ImportOptions, InstancedMesh, Limit, Limits, MeshStats,
@@ -136,6 +138,17 @@ pub fn normalise(name: &str, mesh: &InstancedMesh) -> Result<Vec<u8>, WorldError
 /// What a model holds, for its metadata.
 pub fn stats(mesh: &InstancedMesh) -> serde_json::Value {
     serde_json::to_value(MeshStats::of(mesh)).unwrap_or(serde_json::Value::Null)
+}
+
+/// A stored model's levels of detail: level 0 (the stored GLB, `glb`) and the coarser chain
+/// (`horizon_levels`), read back from its GLB bytes like [`describe_stored`].
+pub fn level_stored(name: &str, glb: &[u8]) -> Result<(LevelInfo, Chain), WorldError> {
+    let mesh = import_bytes(glb, Format::Glb, None, &ImportOptions::trusted())
+        .map_err(|e| WorldError::model(name, e))?
+        .mesh;
+    let bytes = glb.len() as u64;
+    let chain = build_chain(&mesh, bytes, &LevelOptions::default());
+    Ok((level_zero(&mesh, bytes), chain))
 }
 
 /// The descriptors and local bounding sphere of a stored model, read back from its GLB

@@ -38,8 +38,8 @@ pub use hash::{content_hash, is_content_hash};
 pub use ingest::UploadLimits;
 pub use models::Models;
 pub use store::{
-    Applied, BlobDir, BlobStore, MetaStore, ModelDescriptors, ModelRow, ObjectRow, Published,
-    SqliteMeta, User,
+    Applied, BlobDir, BlobStore, MetaStore, ModelDescriptors, ModelLevel, ModelRow, ObjectRow,
+    Published, SqliteMeta, User,
 };
 pub use tree::{new_object, sphere_of, Describe, Tree};
 pub use world::{Change, RebuildReport, Served, World, WorldStatus, SNAPSHOT_EVERY};

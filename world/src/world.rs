@@ -37,14 +37,15 @@ use serde::Serialize;
 use crate::aggregates::{named_blobs, recorded_entries, stored_entries, AggregateSink};
 use crate::error::WorldError;
 use crate::hash::content_hash;
-use crate::ingest::{describe_stored, import_upload, normalise, stats, UploadLimits};
+use crate::ingest::{describe_stored, import_upload, level_stored, normalise, stats, UploadLimits};
 use crate::legacy::{is_legacy, LegacyWorld};
 use crate::models::Models;
 use crate::store::{
-    Applied, BlobDir, BlobStore, MetaStore, ModelDescriptors, ModelRow, Mutation, NewModel,
-    ObjectRow, Published, Snapshot, SqliteMeta, User,
+    Applied, BlobDir, BlobStore, MetaStore, ModelDescriptors, ModelLevel, ModelRow, Mutation,
+    NewModel, ObjectRow, Published, Snapshot, SqliteMeta, User,
 };
 use crate::tree::{Describe, Tree};
+use horizon_levels::{Chain, LevelInfo};
 
 /// Distinct models up to which the BVH's descriptor scales come from every pair of them;
 /// above it, from [`SCALE_SAMPLE_PAIRS`] seeded pairs.
@@ -240,7 +241,7 @@ impl World {
                 .collect::<Result<_, WorldError>>()?;
             for (model_name, glb, stats) in &stored {
                 let row = world
-                    .store_model(glb, glb, model_name, None, stats, None)?
+                    .store_model(glb, glb, model_name, None, stats, None, None)?
                     .0;
                 numbers.push(row.number);
             }
@@ -374,6 +375,7 @@ impl World {
                     bytes: glb.len() as u64,
                     stats,
                     descriptors: legacy.descriptors.get(&m.hash),
+                    levels: None,
                 })?;
                 numbers.insert(m.hash.as_str(), row.number);
             }
@@ -447,12 +449,16 @@ impl World {
         owner: Option<&str>,
         stats: &serde_json::Value,
         descriptors: Option<&ModelDescriptors>,
+        levels: Option<&(LevelInfo, Chain)>,
     ) -> Result<(ModelRow, bool), WorldError> {
         let _storing = self
             .storing
             .lock()
             .map_err(|_| WorldError::Inconsistent("model store lock poisoned".into()))?;
         let asset = self.blobs.put(glb)?;
+        let levels = levels
+            .map(|(zero, chain)| self.store_levels(&asset, zero, chain))
+            .transpose()?;
         let id = content_hash(source);
         let added = self.meta.add_model(NewModel {
             id: &id,
@@ -462,6 +468,7 @@ impl World {
             bytes: glb.len() as u64,
             stats,
             descriptors,
+            levels: levels.as_deref(),
         });
         let (row, created) = match added {
             Ok(added) => added,
@@ -477,6 +484,27 @@ impl World {
             self.models.add(row.clone())?;
         }
         Ok((row, created))
+    }
+
+    /// Stores the blobs of a model's coarser levels (durable before any row names them) and
+    /// returns its level list, level 0 (`asset`, the stored GLB) first.
+    fn store_levels(
+        &self,
+        asset: &str,
+        zero: &LevelInfo,
+        chain: &Chain,
+    ) -> Result<Vec<ModelLevel>, WorldError> {
+        let mut levels = vec![ModelLevel {
+            asset: asset.to_owned(),
+            info: zero.clone(),
+        }];
+        for level in &chain.levels {
+            levels.push(ModelLevel {
+                asset: self.blobs.put(&level.glb)?,
+                info: level.info.clone(),
+            });
+        }
+        Ok(levels)
     }
 
     /// Ingests uploaded bytes for `owner`: import under the upload limits, validate,
@@ -496,10 +524,20 @@ impl World {
         let glb = normalise(name, &ingested.mesh)?;
         self.meta.check_model_quota(owner, glb.len() as u64)?;
         let asset = content_hash(&glb);
-        let described = match self.meta.descriptors(&asset)? {
-            Some(_) => None,
-            None => Some(describe_stored(name, &glb)?),
-        };
+        let (described, levels) = rayon::join(
+            || match self.meta.descriptors(&asset)? {
+                Some(_) => Ok(None),
+                None => describe_stored(name, &glb).map(Some),
+            },
+            || match self.meta.levels(&asset)? {
+                Some(_) => Ok(None),
+                None => level_stored(name, &glb).map(Some),
+            },
+        );
+        let (described, levels) = (described?, levels?);
+        if let Some(failure) = levels.as_ref().and_then(|l| l.1.failure.as_ref()) {
+            tracing::warn!(model = name, "levels of detail stopped early: {failure}");
+        }
         self.store_model(
             bytes,
             &glb,
@@ -507,6 +545,7 @@ impl World {
             Some(owner),
             &stats(&ingested.mesh),
             described.as_ref(),
+            levels.as_ref(),
         )
     }
 
@@ -548,6 +587,57 @@ impl World {
             Ok::<(), WorldError>(())
         })?;
         Ok(missing.len())
+    }
+
+    /// Builds the levels of detail of every model that has none yet (in parallel, reporting
+    /// `progress(done, total)`). Returns how many models were levelled, and for each model
+    /// whose chain stopped on a failure, its name and why (it keeps the levels made before).
+    pub fn level_models(
+        &self,
+        progress: &(dyn Fn(usize, usize) + Sync),
+    ) -> Result<(usize, Vec<(String, String)>), WorldError> {
+        let levelled = self.meta.all_levels()?;
+        let mut missing = Vec::new();
+        let mut seen = HashSet::new();
+        for row in self.models.rows()? {
+            if !levelled.contains_key(&row.asset) && seen.insert(row.asset.clone()) {
+                missing.push(row.number);
+            }
+        }
+        let done = std::sync::atomic::AtomicUsize::new(0);
+        let failures = Mutex::new(Vec::new());
+        progress(0, missing.len());
+        missing.par_iter().try_for_each(|&number| {
+            let row = self.models.row(number)?;
+            let glb = self.models.glb(number)?;
+            let (zero, chain) = level_stored(&row.name, &glb)?;
+            let levels = self.store_levels(&row.asset, &zero, &chain)?;
+            self.meta.put_levels(&row.asset, &levels)?;
+            if let Some(failure) = chain.failure {
+                tracing::warn!(
+                    model = row.name,
+                    "levels of detail stopped early: {failure}"
+                );
+                if let Ok(mut f) = failures.lock() {
+                    f.push((row.name.clone(), failure));
+                }
+            }
+            let n = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+            progress(n, missing.len());
+            Ok::<(), WorldError>(())
+        })?;
+        let failures = failures.into_inner().unwrap_or_default();
+        Ok((missing.len(), failures))
+    }
+
+    /// The levels of detail of the stored GLB `asset` (level 0 first; empty until levelled).
+    pub fn levels_of(&self, asset: &str) -> Result<Vec<ModelLevel>, WorldError> {
+        Ok(self.meta.levels(asset)?.unwrap_or_default())
+    }
+
+    /// Every model's levels of detail, by the content hash of its stored GLB.
+    pub fn all_levels(&self) -> Result<HashMap<String, Vec<ModelLevel>>, WorldError> {
+        self.meta.all_levels()
     }
 
     // ---------------------------------------------------------------------------------------
@@ -1093,6 +1183,9 @@ impl World {
         }
         if let Some(snapshot) = self.meta.snapshot()? {
             keep.insert(snapshot.blob);
+        }
+        for levels in self.meta.all_levels()?.into_values() {
+            keep.extend(levels.into_iter().map(|l| l.asset));
         }
         for entry in recorded_entries(self.meta.as_ref())? {
             keep.insert(entry.glb);

@@ -33,6 +33,7 @@ fn add(
     let asset = content_hash(format!("glb of {tag}").as_bytes());
     meta.add_model(NewModel {
         descriptors: None,
+        levels: None,
         id: &id,
         asset: &asset,
         name: tag,

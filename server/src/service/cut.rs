@@ -43,7 +43,28 @@ use horizon_world::{Served, World, WorldError};
 
 /// Plans the cut for `view` over what `served` holds at `generation`: see the module docs.
 pub fn plan(served: &Served<'_>, models: &AssetTable, view: &View) -> Plan {
+    plan_after(served, models, view, None)
+}
+
+/// [`plan`] for a client that holds `held`: an object keeps the level of detail it has there
+/// while that level stays within [`LEVEL_MARGIN`] of the level it would be given afresh.
+pub fn plan_after(
+    served: &Served<'_>,
+    models: &AssetTable,
+    view: &View,
+    held: Option<&Plan>,
+) -> Plan {
     let mut planner = Planner::new(served, models, view);
+    if let Some(held) = held {
+        planner.held_levels = held
+            .items
+            .iter()
+            .filter_map(|p| match p.key {
+                Key::Object { object, level, .. } => Some((object, level)),
+                Key::Aggregate { .. } => None,
+            })
+            .collect();
+    }
     planner.seed();
     let stopped_by = planner.refine();
     planner.finish(stopped_by)
@@ -77,8 +98,8 @@ pub struct Plan {
 }
 
 /// The decisions that made a plan, by the node: with the same tree and the same view but
-/// for the eye, planning again gives the same plan exactly when [`Decisions::hold_at`] the
-/// new eye. Refinement took the nodes of `refined` in order of their worst-case solid angle
+/// for the eye, planning again (with this plan held, [`plan_after`]) gives the same plan
+/// exactly when [`Decisions::hold_at`] the new eye. Refinement took the nodes of `refined` in order of their worst-case solid angle
 /// (each at least `min_solid_angle`), then either ran out of nodes at or over it, or a
 /// budget refused `stopper`; `frontier` is every other node in the cut.
 #[derive(Clone, Debug, Default)]
@@ -93,13 +114,18 @@ pub struct Decisions {
     ordered: bool,
     /// Each pending object, and whether it subtended `min_solid_angle`.
     pending: Vec<(ObjectId, bool)>,
+    /// Each object entry's level of detail, with what choosing it again takes.
+    levels: Vec<(ObjectId, u8)>,
+    models: Arc<Models>,
+    pixel_angle: f32,
+    max_pixel_error: f64,
 }
 
 impl Decisions {
     /// Whether refinement at `eye`, on the tree the plan was made on, takes the same
     /// decisions: the same nodes refined (in the same order where it matters), the same node
     /// refused, every other node left, every pending object on the same side of
-    /// `min_solid_angle`. Ties count as changes (the planner breaks them by node id), so
+    /// `min_solid_angle`, every object at the same level of detail. Ties count as changes (the planner breaks them by node id), so
     /// "true" is exact: it evaluates the planner's own solid angles.
     pub fn hold_at(&self, tree: &horizon_world::Tree, eye: [f64; 3]) -> bool {
         let eye = eye_of(eye);
@@ -111,6 +137,19 @@ impl Decisions {
             .iter()
             .any(|&(o, seen)| subtends(bvh, o, eye, min) != Some(seen))
         {
+            return false;
+        }
+        // Every object keeps its level of detail (with the hysteresis a held level has).
+        let level_holds = |&(o, level): &(ObjectId, u8)| {
+            let Some(r) = bvh.object(o) else {
+                return false;
+            };
+            let Some(m) = self.models.get(r.model() as usize).and_then(Option::as_ref) else {
+                return level == 0;
+            };
+            level_at(m, &r, eye, self.pixel_angle, self.max_pixel_error, Some(level)) == level
+        };
+        if !self.levels.iter().all(level_holds) {
             return false;
         }
         if self.over_at_seed {
@@ -161,6 +200,24 @@ fn subtends(bvh: &horizon_bvh::Bvh, object: ObjectId, eye: Vec3, min: f32) -> Op
     Some(solid_angle(s.radius, (s.centre - eye).length()) >= min)
 }
 
+/// The level of detail of an object (`r`) of model `m` seen from `eye`.
+fn level_at(
+    m: &ModelAsset,
+    r: &horizon_bvh::ObjectRef<'_>,
+    eye: Vec3,
+    pixel_angle: f32,
+    max_pixel_error: f64,
+    held: Option<u8>,
+) -> u8 {
+    if m.levels.len() < 2 {
+        return 0;
+    }
+    let s = r.sphere();
+    let distance = (s.centre - eye).length() - s.radius;
+    let scale = horizon_mesh::transform::max_axis_scale(&r.transform());
+    m.choose(distance, scale, pixel_angle, max_pixel_error as f32, held)
+}
+
 /// A view's eye in the tree's precision.
 fn eye_of(eye: [f64; 3]) -> Vec3 {
     Vec3::new(eye[0] as f32, eye[1] as f32, eye[2] as f32)
@@ -185,7 +242,8 @@ pub struct Planned {
     pub solid_angle: f32,
 }
 
-/// An entry's identity: `o:<object>@<placed>` or `n:<node>@<hash>`, with the aggregate's
+/// An entry's identity: `o:<object>@<placed>` (`o:<object>@<placed>/<level>` at a level of
+/// detail above 0) or `n:<node>@<hash>`, with the aggregate's
 /// hash cut to its first 64 bits (the whole hash is in the plan's manifest).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum Key {
@@ -195,6 +253,8 @@ pub enum Key {
         object: u64,
         /// Generation of its placement.
         placed: u64,
+        /// Its model's level of detail.
+        level: u8,
     },
     /// A node and its aggregate's content.
     Aggregate {
@@ -214,15 +274,24 @@ pub enum Drawn {
         model: u64,
         /// Model to world.
         transform: Affine3A,
+        /// The level of detail drawn.
+        level: u8,
     },
     /// The node's published aggregate (in the plan's manifest).
     Aggregate,
 }
 
-/// What the cut needs of a model: its stored GLB and what drawing it costs.
-#[derive(Clone, Debug, PartialEq, Eq)]
+/// What the cut needs of a model: its levels of detail, level 0 (the stored GLB) first.
+#[derive(Clone, Debug, PartialEq)]
 pub struct ModelAsset {
-    /// The stored GLB's hash.
+    /// At least one.
+    pub levels: Vec<LevelAsset>,
+}
+
+/// One level of detail of a model: its GLB, what drawing it costs, and what it loses.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LevelAsset {
+    /// The GLB's hash.
     pub hash: String,
     /// Its bytes.
     pub bytes: u64,
@@ -230,6 +299,57 @@ pub struct ModelAsset {
     pub triangles: u64,
     /// Draw calls: one per submesh.
     pub draw_calls: u64,
+    /// Hausdorff distance to level 0, model units.
+    pub error: f32,
+    /// Model units per texel (0 without textures).
+    pub texel: f32,
+}
+
+/// A level of detail is kept while its error (and texel size) stay within this factor of
+/// the threshold on either side: a coarser level is taken only once it is within the
+/// threshold divided by the margin, and a held level is given up only once it exceeds the
+/// threshold times the margin. Moving a little never flips levels back and forth.
+pub const LEVEL_MARGIN: f32 = 1.25;
+
+impl ModelAsset {
+    /// The level to draw an object of this model with, seen from `distance` (to the
+    /// object's nearest point) under a transform that scales the model by at most `scale`:
+    /// the coarsest whose error projects to at most `max_pixel_error` pixels of
+    /// `pixel_angle` radians and whose texels are at most a pixel, with the hysteresis of
+    /// [`LEVEL_MARGIN`] around a `held` level. Level 0 when `max_pixel_error` is 0.
+    pub fn choose(
+        &self,
+        distance: f32,
+        scale: f32,
+        pixel_angle: f32,
+        max_pixel_error: f32,
+        held: Option<u8>,
+    ) -> u8 {
+        if max_pixel_error <= 0.0 || self.levels.len() < 2 || scale <= 0.0 {
+            return 0;
+        }
+        // A pixel's footprint at the object's nearest point, in model units.
+        let footprint = distance.max(0.0) * pixel_angle / scale;
+        let coarsest = |factor: f32| -> usize {
+            let limit = footprint * factor;
+            self.levels
+                .iter()
+                .rposition(|l| l.error <= max_pixel_error * limit && l.texel <= limit)
+                .unwrap_or(0)
+        };
+        let fresh = coarsest(1.0);
+        if let Some(held) = held.map(usize::from).filter(|&h| h < self.levels.len()) {
+            if (coarsest(1.0 / LEVEL_MARGIN)..=coarsest(LEVEL_MARGIN)).contains(&held) {
+                return held as u8;
+            }
+        }
+        fresh as u8
+    }
+
+    fn level(&self, level: u8) -> &LevelAsset {
+        let k = usize::from(level).min(self.levels.len().saturating_sub(1));
+        &self.levels[k]
+    }
 }
 
 /// What the planner needs of a node's published aggregate.
@@ -279,22 +399,57 @@ impl AssetTable {
         nodes
     }
 
-    /// Makes sure every model number up to those `world` holds is known.
+    /// Makes sure every model number up to those `world` holds is known, with its levels of
+    /// detail (a model known with its levels is kept as it is).
     pub fn refresh(&self, world: &World) -> Result<(), WorldError> {
         let rows = world.all_models()?;
+        let before = self.snapshot();
+        let all = if before.is_empty() {
+            Some(world.all_levels()?)
+        } else {
+            None
+        };
         let mut table: Models = Vec::with_capacity(rows.len());
         for row in rows {
-            let count = |key: &str| row.stats.get(key).and_then(|v| v.as_u64()).unwrap_or(0);
             let i = row.number as usize;
             if table.len() <= i {
                 table.resize(i + 1, None);
             }
-            table[i] = Some(Arc::new(ModelAsset {
-                hash: row.asset,
+            if let Some(known) = before.get(i).and_then(Option::as_ref) {
+                if known.levels.len() > 1 && known.levels[0].hash == row.asset {
+                    table[i] = Some(known.clone());
+                    continue;
+                }
+            }
+            let stored = match &all {
+                Some(all) => all.get(&row.asset).cloned().unwrap_or_default(),
+                None => world.levels_of(&row.asset)?,
+            };
+            let count = |key: &str| row.stats.get(key).and_then(|v| v.as_u64()).unwrap_or(0);
+            let mut levels = vec![LevelAsset {
+                hash: row.asset.clone(),
                 bytes: row.bytes,
                 triangles: count("triangles_expanded"),
                 draw_calls: count("submeshes").max(1),
-            }));
+                error: 0.0,
+                texel: 0.0,
+            }];
+            for (k, l) in stored.iter().enumerate() {
+                let asset = LevelAsset {
+                    hash: l.asset.clone(),
+                    bytes: l.info.bytes,
+                    triangles: l.info.triangles,
+                    draw_calls: l.info.submeshes.max(1),
+                    error: l.info.error as f32,
+                    texel: l.info.texel_density.map_or(0.0, |d| (1.0 / d) as f32),
+                };
+                if k == 0 {
+                    levels[0].texel = asset.texel;
+                } else {
+                    levels.push(asset);
+                }
+            }
+            table[i] = Some(Arc::new(ModelAsset { levels }));
         }
         *self
             .by_number
@@ -348,7 +503,7 @@ enum Unit {
 /// An asset as the budgets count it: once per cut.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 enum AssetKey {
-    Model(u64),
+    Model(u64, u8),
     Node(NodeId),
 }
 
@@ -405,6 +560,10 @@ struct Planner<'a> {
     stopper: Option<NodeId>,
     /// Even the coarsest cut was over a budget: nothing was refined by solid angle.
     over_at_seed: bool,
+    /// The level of detail each object has in the plan a client holds.
+    held_levels: HashMap<u64, u8>,
+    /// The angle of one pixel, radians.
+    pixel_angle: f32,
 }
 
 impl<'a> Planner<'a> {
@@ -449,7 +608,24 @@ impl<'a> Planner<'a> {
             refined: Vec::new(),
             stopper: None,
             over_at_seed: false,
+            held_levels: HashMap::new(),
+            pixel_angle: view.pixel_solid_angle.sqrt() as f32,
         }
+    }
+
+    /// The level of detail `o` is drawn with (see [`ModelAsset::choose`]).
+    fn level_of(&self, o: ObjectId) -> u8 {
+        let tree = self.served.tree;
+        let Some(r) = tree.bvh.object(o) else {
+            return 0;
+        };
+        let Some(m) = self.models.get(r.model() as usize).and_then(Option::as_ref) else {
+            return 0;
+        };
+        let held = tree
+            .world_id(o)
+            .and_then(|id| self.held_levels.get(&id).copied());
+        level_at(m, &r, self.eye, self.pixel_angle, self.view.max_pixel_error, held)
     }
 
     /// The root, expanded at once wherever no aggregate can draw it.
@@ -592,12 +768,20 @@ impl<'a> Planner<'a> {
         let Some(model) = self.served.tree.bvh.object(o).map(|o| o.model()) else {
             return;
         };
+        let level = self.level_of(o);
         let (bytes, draw_calls, triangles) = self
             .models
             .get(model as usize)
             .and_then(Option::as_ref)
-            .map_or((0, 1, 0), |m| (m.bytes, m.draw_calls, m.triangles));
-        self.charge(AssetKey::Model(model), bytes, draw_calls, triangles, sign);
+            .map(|m| m.level(level))
+            .map_or((0, 1, 0), |l| (l.bytes, l.draw_calls, l.triangles));
+        self.charge(
+            AssetKey::Model(model, level),
+            bytes,
+            draw_calls,
+            triangles,
+            sign,
+        );
     }
 
     fn charge(&mut self, key: AssetKey, bytes: u64, draw_calls: u64, triangles: u64, sign: i64) {
@@ -648,7 +832,7 @@ impl<'a> Planner<'a> {
 
     fn finish(mut self, stopped_by: Option<StoppedBy>) -> Plan {
         let b = &self.budgets;
-        let decisions = Decisions {
+        let mut decisions = Decisions {
             min_solid_angle: self.min_solid_angle,
             refined: std::mem::take(&mut self.refined),
             frontier: self
@@ -672,6 +856,10 @@ impl<'a> Planner<'a> {
                     Some((o, seen))
                 })
                 .collect(),
+            levels: Vec::new(),
+            models: self.models.clone(),
+            pixel_angle: self.pixel_angle,
+            max_pixel_error: self.view.max_pixel_error,
         };
         let tree = self.served.tree;
         let published = self.served.published;
@@ -686,14 +874,17 @@ impl<'a> Planner<'a> {
                 missing.set(missing.get() + 1);
                 return None;
             };
+            let level = self.level_of(o);
             Some(Planned {
                 key: Key::Object {
                     object,
                     placed: tree.placed_at(o),
+                    level,
                 },
                 what: Drawn::Object {
                     model,
                     transform: r.transform(),
+                    level,
                 },
                 covers: 1,
                 pending,
@@ -733,6 +924,13 @@ impl<'a> Planner<'a> {
                 }
             }
         }
+        decisions.levels = items
+            .iter()
+            .filter_map(|p| match p.key {
+                Key::Object { object, level, .. } => Some((tree.tree_id(object)?, level)),
+                Key::Aggregate { .. } => None,
+            })
+            .collect();
         Plan {
             manifest: self.served.manifest.clone(),
             models: self.models.clone(),
@@ -810,7 +1008,16 @@ impl Plan {
     /// A planned entry's wire id.
     pub fn id(&self, p: &Planned) -> String {
         match p.key {
-            Key::Object { object, placed } => format!("o:{object}@{placed}"),
+            Key::Object {
+                object,
+                placed,
+                level: 0,
+            } => format!("o:{object}@{placed}"),
+            Key::Object {
+                object,
+                placed,
+                level,
+            } => format!("o:{object}@{placed}/{level}"),
             Key::Aggregate { node, .. } => {
                 let hash = self.aggregate(p).map_or("", |a| a.glb.as_str());
                 format!("n:{node}@{hash}")
@@ -820,11 +1027,19 @@ impl Plan {
 
     /// A planned entry as the wire carries it.
     pub fn entry(&self, p: &Planned) -> Entry {
+        let mut level = 0;
         let (kind, asset, bytes, triangles, draw_calls, matrix, role) = match &p.what {
             Drawn::Object {
-                model, transform, ..
+                model,
+                transform,
+                level: l,
             } => {
-                let m = self.models.get(*model as usize).and_then(Option::as_ref);
+                level = u32::from(*l);
+                let m = self
+                    .models
+                    .get(*model as usize)
+                    .and_then(Option::as_ref)
+                    .map(|m| m.level(*l));
                 (
                     EntryKind::Object,
                     m.map_or(String::new(), |m| m.hash.clone()),
@@ -858,7 +1073,7 @@ impl Plan {
                 role,
             }],
             placements: vec![Placement { asset, matrix }],
-            level: 0,
+            level,
             pending: p.pending,
             bytes,
             triangles,
@@ -926,9 +1141,29 @@ impl Plan {
                 .and_then(|n| fresh_nodes.get(&n))
                 .or_else(|| p.object().and_then(|o| fresh_objects.get(&o)))
             {
-                // The same node or object, in a new version.
+                // The same node or object, in a new version or at another level of detail.
                 replaces[i].push(id.clone());
-                RemoveReason::Replaced
+                match (p.key, fresh[i].key) {
+                    (
+                        Key::Object {
+                            placed: a,
+                            level: from,
+                            ..
+                        },
+                        Key::Object {
+                            placed: b,
+                            level: to,
+                            ..
+                        },
+                    ) if a == b && from != to => {
+                        if to < from {
+                            RemoveReason::Refined
+                        } else {
+                            RemoveReason::Coarsened
+                        }
+                    }
+                    _ => RemoveReason::Replaced,
+                }
             } else if p.object().is_some_and(|o| tree.tree_id(o).is_none()) {
                 RemoveReason::Deleted
             } else if let Some(&i) = ancestors(place_of(p))

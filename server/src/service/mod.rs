@@ -165,14 +165,24 @@ impl AppState {
         &self,
         view: &horizon_protocol::View,
     ) -> Result<cut::Plan, horizon_world::WorldError> {
+        self.plan_after(view, None)
+    }
+
+    /// [`AppState::plan`] for a client holding `held` (its objects keep their levels of
+    /// detail within the margin, `cut::plan_after`).
+    pub fn plan_after(
+        &self,
+        view: &horizon_protocol::View,
+        held: Option<&cut::Plan>,
+    ) -> Result<cut::Plan, horizon_world::WorldError> {
         let world = &self.inner.world;
         let models = &self.inner.models;
-        let plan = world.with_served(|served| cut::plan(served, models, view))?;
+        let plan = world.with_served(|served| cut::plan_after(served, models, view, held))?;
         if plan.missing_models == 0 {
             return Ok(plan);
         }
         models.refresh(world)?;
-        world.with_served(|served| cut::plan(served, models, view))
+        world.with_served(|served| cut::plan_after(served, models, view, held))
     }
 
     /// One cut at `view`, off the async runtime.

@@ -440,7 +440,8 @@ async fn write(
             let state = state.clone();
             tokio::task::spawn_blocking(move || {
                 let world = state.world().clone();
-                let plan = state.plan(&view)?;
+                let held = before.as_ref().filter(|_| !want_reset);
+                let plan = state.plan_after(&view, held)?;
                 let delta = match (&before, want_reset) {
                     (Some(before), false) => {
                         Some(world.with_served(|served| plan.diff(before, served))?)

@@ -185,6 +185,12 @@ pub trait MetaStore: Send + Sync + std::fmt::Debug {
     fn descriptors(&self, asset: &str) -> Result<Option<ModelDescriptors>, WorldError>;
     /// Records the descriptors of a stored GLB.
     fn put_descriptors(&self, asset: &str, d: &ModelDescriptors) -> Result<(), WorldError>;
+    /// The levels of detail of a stored GLB, by its content hash (level 0 first).
+    fn levels(&self, asset: &str) -> Result<Option<Vec<ModelLevel>>, WorldError>;
+    /// Every stored GLB's levels of detail, by its content hash.
+    fn all_levels(&self) -> Result<std::collections::HashMap<String, Vec<ModelLevel>>, WorldError>;
+    /// Records the levels of detail of a stored GLB (their blobs are durable before).
+    fn put_levels(&self, asset: &str, levels: &[ModelLevel]) -> Result<(), WorldError>;
 
     /// Applies `mutations` in order as one transaction, each making the next generation, for
     /// `user` (`None`: the world itself, which owns every object and has no quota). A user
@@ -245,4 +251,17 @@ pub struct NewModel<'a> {
     pub stats: &'a serde_json::Value,
     /// Its descriptors, recorded in the same transaction if given.
     pub descriptors: Option<&'a ModelDescriptors>,
+    /// Its levels of detail, recorded in the same transaction if given (their blobs are
+    /// durable before).
+    pub levels: Option<&'a [ModelLevel]>,
+}
+
+/// One level of detail of a stored model: level 0 is the stored GLB itself.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ModelLevel {
+    /// The content hash of the level's GLB.
+    pub asset: String,
+    /// Its error, triangles, draw calls, bytes and texel density.
+    #[serde(flatten)]
+    pub info: horizon_levels::LevelInfo,
 }

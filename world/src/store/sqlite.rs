@@ -10,8 +10,8 @@ use glam::Affine3A;
 use rusqlite::{params, Connection, OptionalExtension, Transaction};
 
 use super::{
-    Applied, MetaStore, ModelDescriptors, ModelRow, Mutation, NewModel, ObjectRow, Published,
-    Snapshot, User,
+    Applied, MetaStore, ModelDescriptors, ModelLevel, ModelRow, Mutation, NewModel, ObjectRow,
+    Published, Snapshot, User,
 };
 use crate::error::WorldError;
 
@@ -37,6 +37,7 @@ CREATE TABLE IF NOT EXISTS descriptors (
     centre BLOB NOT NULL,
     radius REAL NOT NULL
 );
+CREATE TABLE IF NOT EXISTS levels (asset TEXT PRIMARY KEY, levels TEXT NOT NULL);
 CREATE TABLE IF NOT EXISTS objects (
     id INTEGER PRIMARY KEY AUTOINCREMENT,
     model INTEGER NOT NULL REFERENCES models(number),
@@ -166,6 +167,9 @@ impl MetaStore for SqliteMeta {
         if let Some(d) = m.descriptors {
             insert_descriptors(&tx, m.asset, d)?;
         }
+        if let Some(levels) = m.levels {
+            insert_levels(&tx, m.asset, levels)?;
+        }
         let row = model_by_id(&tx, m.id)?
             .ok_or_else(|| WorldError::Inconsistent("a model vanished on insert".into()))?;
         tx.commit().map_err(sql)?;
@@ -247,6 +251,39 @@ impl MetaStore for SqliteMeta {
     fn put_descriptors(&self, asset: &str, d: &ModelDescriptors) -> Result<(), WorldError> {
         let db = self.lock()?;
         insert_descriptors(&db, asset, d)
+    }
+
+    fn levels(&self, asset: &str) -> Result<Option<Vec<ModelLevel>>, WorldError> {
+        let db = self.lock()?;
+        let text: Option<String> = db
+            .query_row("SELECT levels FROM levels WHERE asset = ?1", [asset], |r| {
+                r.get(0)
+            })
+            .optional()
+            .map_err(sql)?;
+        text.map(|t| parse_levels(asset, &t)).transpose()
+    }
+
+    fn all_levels(&self) -> Result<std::collections::HashMap<String, Vec<ModelLevel>>, WorldError> {
+        let db = self.lock()?;
+        let mut stmt = db
+            .prepare("SELECT asset, levels FROM levels")
+            .map_err(sql)?;
+        let rows = stmt
+            .query_map([], |r| Ok((r.get::<_, String>(0)?, r.get::<_, String>(1)?)))
+            .map_err(sql)?;
+        let mut out = std::collections::HashMap::new();
+        for row in rows {
+            let (asset, text) = row.map_err(sql)?;
+            let levels = parse_levels(&asset, &text)?;
+            out.insert(asset, levels);
+        }
+        Ok(out)
+    }
+
+    fn put_levels(&self, asset: &str, levels: &[ModelLevel]) -> Result<(), WorldError> {
+        let db = self.lock()?;
+        insert_levels(&db, asset, levels)
     }
 
     fn apply(
@@ -654,6 +691,22 @@ fn insert_descriptors(
     )
     .map_err(sql)?;
     Ok(())
+}
+
+fn insert_levels(db: &Connection, asset: &str, levels: &[ModelLevel]) -> Result<(), WorldError> {
+    let text = serde_json::to_string(levels)
+        .map_err(|e| WorldError::Inconsistent(format!("levels of {asset}: {e}")))?;
+    db.execute(
+        "INSERT OR REPLACE INTO levels (asset, levels) VALUES (?1, ?2)",
+        params![asset, text],
+    )
+    .map_err(sql)?;
+    Ok(())
+}
+
+fn parse_levels(asset: &str, text: &str) -> Result<Vec<ModelLevel>, WorldError> {
+    serde_json::from_str(text)
+        .map_err(|e| WorldError::Inconsistent(format!("levels of {asset} do not parse: {e}")))
 }
 
 /// Refuses a model of `bytes` for `owner` past their `max_bytes`.

@@ -3,7 +3,9 @@
 use axum::extract::State;
 use axum::Json;
 use horizon_protocol::{Budgets, CutResponse, ErrorBody, ErrorCode, View};
-use horizon_protocol::{DEFAULT_MIN_SOLID_ANGLE, DEFAULT_PIXEL_SOLID_ANGLE};
+use horizon_protocol::{
+    DEFAULT_MAX_PIXEL_ERROR, DEFAULT_MIN_SOLID_ANGLE, DEFAULT_PIXEL_SOLID_ANGLE,
+};
 use serde::Deserialize;
 use utoipa::IntoParams;
 
@@ -20,6 +22,9 @@ pub struct CutParams {
     pub min_solid_angle: Option<f64>,
     /// The solid angle of one screen pixel. Default 3.0e-7.
     pub pixel_solid_angle: Option<f64>,
+    /// The most geometric error an object's level of detail may show, pixels. Default 1; 0
+    /// sends every object at full detail.
+    pub max_pixel_error: Option<f64>,
     /// The most entries (default 4,000).
     pub max_entries: Option<u64>,
     /// The most asset bytes.
@@ -47,6 +52,7 @@ impl CutParams {
             eye: [x, y, z],
             min_solid_angle: self.min_solid_angle.unwrap_or(DEFAULT_MIN_SOLID_ANGLE),
             pixel_solid_angle: self.pixel_solid_angle.unwrap_or(DEFAULT_PIXEL_SOLID_ANGLE),
+            max_pixel_error: self.max_pixel_error.unwrap_or(DEFAULT_MAX_PIXEL_ERROR),
             budgets: Budgets {
                 max_entries: self.max_entries,
                 max_bytes: self.max_bytes,

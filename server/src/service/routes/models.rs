@@ -4,8 +4,8 @@ use axum::extract::{Path, Request, State};
 use axum::http::header::CONTENT_TYPE;
 use axum::http::StatusCode;
 use axum::Json;
-use horizon_protocol::{ErrorBody, ErrorCode, ModelInfo, ModelPage};
-use horizon_world::ModelRow;
+use horizon_protocol::{ErrorBody, ErrorCode, ModelInfo, ModelLevelInfo, ModelPage};
+use horizon_world::{ModelLevel, ModelRow};
 use serde::Deserialize;
 use utoipa::IntoParams;
 
@@ -65,14 +65,16 @@ pub async fn upload(
         ));
     }
     let bytes = body_bytes(request, state.config().body_limit).await?;
-    let (row, created) = state
+    let (row, created, levels) = state
         .blocking(move |world| {
             let name = if name.is_empty() {
                 format!("model-{}", &horizon_world::content_hash(&bytes)[..12])
             } else {
                 name
             };
-            world.upload_model(&bytes, &name, &user.name)
+            let (row, created) = world.upload_model(&bytes, &name, &user.name)?;
+            let levels = world.levels_of(&row.asset)?;
+            Ok::<_, horizon_world::WorldError>((row, created, levels))
         })
         .await?;
     if created {
@@ -84,7 +86,7 @@ pub async fn upload(
     } else {
         StatusCode::OK
     };
-    Ok((status, Json(info(&row))))
+    Ok((status, Json(info(&row, &levels))))
 }
 
 /// A model's metadata.
@@ -98,11 +100,17 @@ pub async fn get(
     State(state): State<AppState>,
     Path(id): Path<String>,
 ) -> AppResult<Json<ModelInfo>> {
-    let row = state
-        .blocking(move |world| world.model(&id).map(|r| r.ok_or(id)))
+    let (row, levels) = state
+        .blocking(move |world| {
+            let Some(row) = world.model(&id)? else {
+                return Ok(Err(id));
+            };
+            let levels = world.levels_of(&row.asset)?;
+            Ok::<_, horizon_world::WorldError>(Ok((row, levels)))
+        })
         .await?
         .map_err(|id| AppError::new(ErrorCode::NotFound, format!("no model {id}")))?;
-    Ok(Json(info(&row)))
+    Ok(Json(info(&row, &levels)))
 }
 
 /// Query of `GET /v1/models`.
@@ -127,17 +135,27 @@ pub async fn list(
 ) -> AppResult<Json<ModelPage>> {
     let limit = page_size(query.limit)?;
     let rows = state
-        .blocking(move |world| world.models_page(query.after.as_deref(), limit + 1))
+        .blocking(move |world| {
+            let mut rows = world.models_page(query.after.as_deref(), limit + 1)?;
+            let next = (rows.len() > limit).then(|| rows[limit - 1].id.clone());
+            rows.truncate(limit);
+            let mut out = Vec::with_capacity(rows.len());
+            for row in rows {
+                let levels = world.levels_of(&row.asset)?;
+                out.push((row, levels));
+            }
+            Ok::<_, horizon_world::WorldError>((out, next))
+        })
         .await?;
-    let next = (rows.len() > limit).then(|| rows[limit - 1].id.clone());
+    let (rows, next) = rows;
     Ok(Json(ModelPage {
-        models: rows.iter().take(limit).map(info).collect(),
+        models: rows.iter().map(|(row, levels)| info(row, levels)).collect(),
         next,
     }))
 }
 
-/// A model row as the API shows it.
-pub fn info(row: &ModelRow) -> ModelInfo {
+/// A model row and its levels of detail as the API shows them.
+pub fn info(row: &ModelRow, levels: &[ModelLevel]) -> ModelInfo {
     let count = |key: &str| row.stats.get(key).and_then(|v| v.as_u64()).unwrap_or(0);
     ModelInfo {
         id: row.id.clone(),
@@ -151,5 +169,18 @@ pub fn info(row: &ModelRow) -> ModelInfo {
         triangles_expanded: count("triangles_expanded"),
         materials: count("materials"),
         textures: count("textures"),
+        levels: levels
+            .iter()
+            .enumerate()
+            .map(|(k, l)| ModelLevelInfo {
+                level: k as u32,
+                asset: l.asset.clone(),
+                bytes: l.info.bytes,
+                triangles: l.info.triangles,
+                draw_calls: l.info.submeshes.max(1),
+                error: l.info.error,
+                texel_density: l.info.texel_density,
+            })
+            .collect(),
     }
 }
