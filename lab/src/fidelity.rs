@@ -57,6 +57,14 @@ pub struct Args {
     /// The cut's draw-call budget.
     #[arg(long)]
     pub max_draw_calls: Option<u64>,
+    /// The geometric error, in pixels, an object's level of detail may show (0: every
+    /// object at full detail).
+    #[arg(long, default_value_t = horizon_protocol::DEFAULT_MAX_PIXEL_ERROR)]
+    pub max_pixel_error: f64,
+    /// Also plan, render and measure each view's cut without levels of detail (every object
+    /// at level 0), the peer the levels are compared with in the same run.
+    #[arg(long)]
+    pub levels_peer: bool,
     /// Instead of seeded views: render node N's aggregate alone against the objects it covers
     /// alone, from above at 45 degrees and at the node's nearest display distance (times
     /// `--node-distance`).
@@ -107,6 +115,23 @@ pub struct ViewReport {
     pub iou_worst: Vec<(String, f64)>,
     /// Seconds to render both.
     pub render_seconds: f64,
+    /// The same cut without levels of detail, with `--levels-peer`.
+    pub flat: Option<FlatReport>,
+    /// Object entries drawn at a level above 0.
+    pub levelled: usize,
+}
+
+/// The cut without levels of detail at the same view, against the full world.
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct FlatReport {
+    /// PSNR against the full world.
+    pub psnr: f64,
+    /// SSIM against the full world.
+    pub ssim: f64,
+    /// Holes.
+    pub holes: f64,
+    /// What it costs.
+    pub cost: Cost,
 }
 
 /// What drawing a set of entries costs a client.
@@ -139,6 +164,8 @@ pub struct Report {
     pub max_entries: u64,
     /// Draw-call budget.
     pub max_draw_calls: Option<u64>,
+    /// Pixels of error a level of detail may show.
+    pub max_pixel_error: f64,
     /// Per view.
     pub views: Vec<ViewReport>,
 }
@@ -178,6 +205,7 @@ pub fn measure(args: &Args) -> anyhow::Result<Report> {
     // The full world: a cut that refines everything.
     let mut everything = View::at([0.0; 3]);
     everything.min_solid_angle = 1e-12;
+    everything.max_pixel_error = 0.0;
     everything.budgets = Budgets {
         max_entries: Some(horizon_protocol::MAX_ENTRIES_LIMIT),
         ..Budgets::default()
@@ -206,12 +234,24 @@ pub fn measure(args: &Args) -> anyhow::Result<Report> {
     for (name, camera) in cameras(&bounds, args) {
         let mut view = View::at(camera.eye.to_array().map(f64::from));
         view.min_solid_angle = args.min_solid_angle;
+        view.max_pixel_error = args.max_pixel_error;
         view.budgets = Budgets {
             max_entries: Some(args.max_entries),
             max_draw_calls: args.max_draw_calls,
             ..Budgets::default()
         };
         let cut_entries = world.with_served(|s| plan(s, &table, &view).entries())?;
+        let flat = if args.levels_peer {
+            let flat_view = View {
+                max_pixel_error: 0.0,
+                ..view
+            };
+            let flat_entries = world.with_served(|s| plan(s, &table, &flat_view).entries())?;
+            let frame = assets.scene(&flat_entries)?.render(&camera, args.samples);
+            Some((flat_entries, frame))
+        } else {
+            None
+        };
         let cut_scene = assets.scene(&cut_entries)?;
         let started = Instant::now();
         let full = full_scene.render(&camera, args.samples);
@@ -223,6 +263,15 @@ pub fn measure(args: &Args) -> anyhow::Result<Report> {
             off16,
             holes,
         } = compare(&full, &cut);
+        let flat = flat.map(|(entries, frame)| {
+            let c = compare(&full, &frame);
+            FlatReport {
+                psnr: c.psnr,
+                ssim: c.ssim,
+                holes: c.holes,
+                cost: cost(&entries),
+            }
+        });
         if let Some(dir) = &args.images {
             std::fs::create_dir_all(dir)?;
             full.save_png(&dir.join(format!("{name}-full.png")))?;
@@ -252,6 +301,8 @@ pub fn measure(args: &Args) -> anyhow::Result<Report> {
             iou_worst: worst,
             largest: largest(&cut_entries),
             render_seconds,
+            flat,
+            levelled: cut_entries.iter().filter(|e| e.level > 0).count(),
         };
         eprintln!(
             "{name}: PSNR {psnr:.1} dB, SSIM {ssim:.4}, holes {:.3}%, {} entries ({} aggregates), {:.1} s",
@@ -271,6 +322,7 @@ pub fn measure(args: &Args) -> anyhow::Result<Report> {
         min_solid_angle: args.min_solid_angle,
         max_entries: args.max_entries,
         max_draw_calls: args.max_draw_calls,
+        max_pixel_error: args.max_pixel_error,
         views,
     })
 }
@@ -369,6 +421,7 @@ fn focus(
         min_solid_angle: args.min_solid_angle,
         max_entries: args.max_entries,
         max_draw_calls: args.max_draw_calls,
+        max_pixel_error: args.max_pixel_error,
         views: vec![ViewReport {
             name,
             eye: eye.to_array(),
@@ -386,6 +439,8 @@ fn focus(
             iou_worst: ious,
             largest: largest(&drawn),
             render_seconds,
+            flat: None,
+            levelled: drawn.iter().filter(|e| e.level > 0).count(),
         }],
     })
 }
@@ -666,6 +721,38 @@ fn print_table(r: &Report) -> anyhow::Result<()> {
             v.iou_min,
             v.iou_under_0_9
         )?;
+    }
+    if r.views.iter().any(|v| v.flat.is_some()) {
+        outln!()?;
+        outln!(
+            "Levels of detail (at most {} px of error) against the same cut without them (level 0 throughout), both against the full world:",
+            r.max_pixel_error
+        )?;
+        outln!()?;
+        outln!("| view | download without / with levels | PSNR dB without / with | SSIM without / with | holes without / with | triangles without / with | entries at a level > 0 |")?;
+        outln!("|---|---|---|---|---|---|---|")?;
+        for v in &r.views {
+            let Some(f) = &v.flat else { continue };
+            outln!(
+                "| {} | {} / {} ({:.3}x) | {:.1} / {:.1} ({:+.2}) | {:.4} / {:.4} | {:.3}% / {:.3}% | {} / {} ({:.2}x) | {} of {} |",
+                v.name,
+                mb(f.cost.bytes),
+                mb(v.cut.bytes),
+                ratio(v.cut.bytes, f.cost.bytes),
+                f.psnr,
+                v.psnr,
+                v.psnr - f.psnr,
+                f.ssim,
+                v.ssim,
+                f.holes * 100.0,
+                v.holes * 100.0,
+                f.cost.triangles,
+                v.cut.triangles,
+                ratio(v.cut.triangles, f.cost.triangles),
+                v.levelled,
+                v.entries
+            )?;
+        }
     }
     Ok(())
 }

@@ -3,7 +3,8 @@
 //! levels): every model gets a chain of coarser versions of itself, each served as its own
 //! content-addressed GLB, so a cut can send an object at the detail its pixels need.
 //!
-//! [`build_chain`] runs, from the model as stored (level 0), a loop of named stages:
+//! [`build_chain`] first re-encodes the model as stored (level 0) compactly (stage 4 below);
+//! that is level 1 when it saves enough bytes. Then it runs a loop of named stages:
 //! 1. **geometry**: instance-aware simplification (`horizon_simplify::simplify`; on a model
 //!    whose parts are each placed once it is the plain quadric simplifier) to about
 //!    [`LevelOptions::ratio`] of the previous level's triangles, never below
@@ -17,10 +18,12 @@
 //!    `horizon_simplify::distance`), in model units, kept monotone along the chain (a level
 //!    is at least as far from the model as the one before it); the texel density (texels per
 //!    model unit, over the textured surface);
-//! 4. **encode**: the GLB a client downloads, written as aggregates are (instances in
-//!    EXT_mesh_gpu_instancing, short normals, UVs and rotations, 16-bit positions wherever
-//!    they stay within [`QUANTIZATION_SHARE`] of the level's error); a level that saves less
-//!    than [`LevelOptions::min_saving`] of the previous level's bytes ends the chain.
+//! 4. **encode**: the GLB a client downloads, the smaller of two encodings: as aggregates
+//!    are written (instances in EXT_mesh_gpu_instancing, short normals, UVs and rotations,
+//!    16-bit positions wherever they stay within [`QUANTIZATION_SHARE`] of the level's
+//!    error), or quantized over each submesh's box and meshopt-compressed (positions 16-bit
+//!    over the part's box: under a millimetre on a 20 m part); a level that saves less than
+//!    [`LevelOptions::min_saving`] of the previous level's bytes ends the chain.
 //!
 //! The chain ends when neither geometry nor textures can be reduced. Geometry and texture
 //! reductions go together, one level for both: a level is one GLB.
@@ -70,7 +73,7 @@ impl Default for LevelOptions {
             floor_triangles: 64,
             stall: 0.75,
             min_texture_side: 16,
-            min_saving: 0.2,
+            min_saving: 0.1,
             distance_samples: 20_000,
             max_levels: 8,
         }
@@ -135,7 +138,29 @@ pub fn build_chain(model: &InstancedMesh, bytes: u64, options: &LevelOptions) ->
         samples: options.distance_samples,
         seed: 0,
     };
-    while chain.levels.len() < options.max_levels {
+    // Stage 0: the model itself in the compact encoding, when that alone saves enough. Its
+    // error is what quantization may move a vertex: half a 16-bit step along each axis of a
+    // part's box, at most the model's diagonal over 65,535.
+    match encode(model, 0.0, diagonal) {
+        Ok(glb) if glb.len() as f64 <= (1.0 - options.min_saving) * bytes as f64 => {
+            let info = LevelInfo {
+                error: f64::from(diagonal) / 65535.0,
+                bytes: glb.len() as u64,
+                ..previous_info.clone()
+            };
+            previous_info = info.clone();
+            chain.levels.push(Level { glb, info });
+        }
+        Ok(_) => {}
+        Err(e) => {
+            chain.failure = Some(format!("the model could not be re-encoded: {e}"));
+            return chain;
+        }
+    }
+    let mut last_bytes = previous_info.bytes;
+    let mut steps = 0;
+    while chain.levels.len() < options.max_levels && steps < 4 * options.max_levels {
+        steps += 1;
         let from = previous.as_ref().unwrap_or(model);
         // Stage 1: geometry, measured.
         let mut simplified = None;
@@ -203,22 +228,14 @@ pub fn build_chain(model: &InstancedMesh, bytes: u64, options: &LevelOptions) ->
             mesh.textures = textures;
         }
         // Stage 4: encode.
-        let tolerance = (QUANTIZATION_SHARE * error).max(1e-5 * f64::from(diagonal)) as f32;
-        let glb = match export_glb(&mesh, &ExportOptions::aggregate(tolerance)) {
+        let encoded = encode(&mesh, error, diagonal);
+        let glb = match encoded {
             Ok(glb) => glb,
             Err(e) => {
                 chain.failure = Some(format!("the level could not be written: {e}"));
                 break;
             }
         };
-        if glb.len() as f64 > (1.0 - options.min_saving) * previous_info.bytes as f64 {
-            if geometry_step || geometry_done {
-                break;
-            }
-            // Halving the textures no longer pays: the geometry goes on alone.
-            textures_done = true;
-            continue;
-        }
         let info = LevelInfo {
             error,
             triangles: mesh.expanded_triangle_count(),
@@ -226,11 +243,36 @@ pub fn build_chain(model: &InstancedMesh, bytes: u64, options: &LevelOptions) ->
             bytes: glb.len() as u64,
             texel_density: texel_density(&mesh),
         };
+        if glb.len() as f64 > (1.0 - options.min_saving) * last_bytes as f64 {
+            if geometry_step {
+                // Not worth a level of its own: the next step goes on from it.
+                previous_info = info;
+                previous = Some(mesh);
+                continue;
+            }
+            // Halving the textures no longer pays: the geometry goes on alone.
+            textures_done = true;
+            continue;
+        }
+        last_bytes = glb.len() as u64;
         previous_info = info.clone();
         chain.levels.push(Level { glb, info });
         previous = Some(mesh);
     }
     chain
+}
+
+/// A level's GLB: the smaller of the two encodings (see the module docs), positions within
+/// [`QUANTIZATION_SHARE`] of `error` (or a hundred-thousandth of the `diagonal`).
+fn encode(
+    mesh: &InstancedMesh,
+    error: f64,
+    diagonal: f32,
+) -> Result<Vec<u8>, horizon_mesh::ExportError> {
+    let tolerance = (QUANTIZATION_SHARE * error).max(1e-5 * f64::from(diagonal)) as f32;
+    let a = export_glb(mesh, &ExportOptions::aggregate(tolerance))?;
+    let c = export_glb(mesh, &ExportOptions::compressed())?;
+    Ok(if c.len() < a.len() { c } else { a })
 }
 
 /// The share of `mesh`'s surface area in the submeshes that `kept` says lost all their
