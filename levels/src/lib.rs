@@ -158,6 +158,7 @@ pub fn build_chain(model: &InstancedMesh, bytes: u64, options: &LevelOptions) ->
         }
     }
     let mut last_bytes = previous_info.bytes;
+    let mut pixels: Vec<Option<image::RgbaImage>> = vec![None; model.textures.len()];
     let mut steps = 0;
     while chain.levels.len() < options.max_levels && steps < 4 * options.max_levels {
         steps += 1;
@@ -198,7 +199,9 @@ pub fn build_chain(model: &InstancedMesh, bytes: u64, options: &LevelOptions) ->
         if textures_done {
             textures.clear();
         }
-        let halved = match halve_textures(&mut textures, options.min_texture_side) {
+        let mut next_pixels = pixels.clone();
+        let halved = match halve_textures(&mut textures, &mut next_pixels, options.min_texture_side)
+        {
             Ok(halved) => halved && !textures_done,
             Err(e) => {
                 chain.failure = Some(format!("a texture could not be resampled: {e}"));
@@ -248,6 +251,9 @@ pub fn build_chain(model: &InstancedMesh, bytes: u64, options: &LevelOptions) ->
                 // Not worth a level of its own: the next step goes on from it.
                 previous_info = info;
                 previous = Some(mesh);
+                if halved {
+                    pixels = next_pixels;
+                }
                 continue;
             }
             // Halving the textures no longer pays: the geometry goes on alone.
@@ -255,6 +261,9 @@ pub fn build_chain(model: &InstancedMesh, bytes: u64, options: &LevelOptions) ->
             continue;
         }
         last_bytes = glb.len() as u64;
+        if halved {
+            pixels = next_pixels;
+        }
         previous_info = info.clone();
         chain.levels.push(Level { glb, info });
         previous = Some(mesh);
@@ -269,9 +278,13 @@ fn encode(
     error: f64,
     diagonal: f32,
 ) -> Result<Vec<u8>, horizon_mesh::ExportError> {
+    let c = export_glb(mesh, &ExportOptions::compressed())?;
+    // The instanced encoding can only win where parts are placed more than once.
+    if mesh.instances.len() <= mesh.submeshes.len() {
+        return Ok(c);
+    }
     let tolerance = (QUANTIZATION_SHARE * error).max(1e-5 * f64::from(diagonal)) as f32;
     let a = export_glb(mesh, &ExportOptions::aggregate(tolerance))?;
-    let c = export_glb(mesh, &ExportOptions::compressed())?;
     Ok(if c.len() < a.len() { c } else { a })
 }
 
@@ -306,26 +319,40 @@ fn dropped_area(mesh: &InstancedMesh, kept: &[Option<usize>]) -> f64 {
     }
 }
 
-/// Halves every texture longer than `min_side` (box filter, same encoding). Returns whether
+/// Halves every texture longer than `min_side` ([`half_box`], same encoding). Returns whether
 /// any was.
-fn halve_textures(textures: &mut [Texture], min_side: u32) -> Result<bool, image::ImageError> {
+/// `pixels` holds each texture's decoded texels when known (they are kept for the next
+/// halving, so that no level decodes what the one before it encoded).
+fn halve_textures(
+    textures: &mut [Texture],
+    pixels: &mut [Option<image::RgbaImage>],
+    min_side: u32,
+) -> Result<bool, image::ImageError> {
     let mut any = false;
-    for texture in textures {
+    for (texture, decoded) in textures.iter_mut().zip(pixels) {
         let (w, h) = texture.size;
         if w.max(h) <= min_side {
             continue;
         }
-        *texture = halved(texture)?;
+        *texture = halved(texture, decoded)?;
         any = true;
     }
     Ok(any)
 }
 
-/// A texture at half its size along both sides (at least one texel).
-fn halved(texture: &Texture) -> Result<Texture, image::ImageError> {
-    let image = texture.decode()?;
-    let (w, h) = ((image.width() / 2).max(1), (image.height() / 2).max(1));
-    let small = image::imageops::resize(&image, w, h, image::imageops::FilterType::Triangle);
+/// A texture at half its size along both sides (at least one texel); `decoded` holds its
+/// texels, if known, and then the halved ones.
+fn halved(
+    texture: &Texture,
+    decoded: &mut Option<image::RgbaImage>,
+) -> Result<Texture, image::ImageError> {
+    let image = match decoded.take() {
+        Some(image) => image,
+        None => texture.decode()?,
+    };
+    let small = half_box(&image);
+    let (w, h) = small.dimensions();
+    *decoded = Some(small.clone());
     let mut bytes = Vec::new();
     let mut out = std::io::Cursor::new(&mut bytes);
     if texture.mime_type == "image/jpeg" {
@@ -340,6 +367,27 @@ fn halved(texture: &Texture) -> Result<Texture, image::ImageError> {
         size: (w, h),
         wrap_u: texture.wrap_u,
         wrap_v: texture.wrap_v,
+    })
+}
+
+/// A mip level: each texel the mean of the 2x2 block above it (a side of odd length folds
+/// its last row or column into the block before it; a side of 1 stays 1).
+fn half_box(image: &image::RgbaImage) -> image::RgbaImage {
+    let (w, h) = image.dimensions();
+    let (hw, hh) = ((w / 2).max(1), (h / 2).max(1));
+    image::RgbaImage::from_fn(hw, hh, |x, y| {
+        let xs = [2 * x, (2 * x + 1).min(w - 1)];
+        let ys = [2 * y, (2 * y + 1).min(h - 1)];
+        let mut sum = [0u32; 4];
+        for &sy in &ys {
+            for &sx in &xs {
+                let p = image.get_pixel(sx.min(w - 1), sy.min(h - 1)).0;
+                for c in 0..4 {
+                    sum[c] += u32::from(p[c]);
+                }
+            }
+        }
+        image::Rgba(sum.map(|v| ((v + 2) / 4) as u8))
     })
 }
 

@@ -20,8 +20,8 @@ mod world;
 
 pub use cut::{
     Asset, AssetRole, Budgets, CutResponse, Entry, EntryKind, Placement, StoppedBy, View,
-    DEFAULT_MAX_ENTRIES, DEFAULT_MAX_PIXEL_ERROR, DEFAULT_MIN_SOLID_ANGLE, DEFAULT_PIXEL_SOLID_ANGLE,
-    MAX_ENTRIES_LIMIT,
+    DEFAULT_MAX_ENTRIES, DEFAULT_MAX_PIXEL_ERROR, DEFAULT_MIN_SOLID_ANGLE,
+    DEFAULT_PIXEL_SOLID_ANGLE, MAX_ENTRIES_LIMIT,
 };
 pub use error::{ErrorBody, ErrorCode, ErrorDetail};
 pub use models::{ModelInfo, ModelLevelInfo, ModelPage};

@@ -58,6 +58,10 @@ const SCALE_SAMPLE_SEED: u64 = 0x5CA1E;
 /// replays at most about this many.
 pub const SNAPSHOT_EVERY: u64 = 10_000;
 
+/// Models levelled per batch by [`World::level_models`]: their blobs made durable in one
+/// flush, their level lists recorded in one transaction.
+const LEVEL_BATCH: usize = 128;
+
 /// A world, opened (see the module docs).
 #[derive(Debug)]
 pub struct World {
@@ -457,7 +461,7 @@ impl World {
             .map_err(|_| WorldError::Inconsistent("model store lock poisoned".into()))?;
         let asset = self.blobs.put(glb)?;
         let levels = levels
-            .map(|(zero, chain)| self.store_levels(&asset, zero, chain))
+            .map(|(zero, chain)| self.list_levels(&asset, zero, chain, false))
             .transpose()?;
         let id = content_hash(source);
         let added = self.meta.add_model(NewModel {
@@ -486,21 +490,28 @@ impl World {
         Ok((row, created))
     }
 
-    /// Stores the blobs of a model's coarser levels (durable before any row names them) and
-    /// returns its level list, level 0 (`asset`, the stored GLB) first.
-    fn store_levels(
+    /// Stores the blobs of a model's coarser levels (durable before any row names them, or
+    /// `staged` for the caller's next `commit_staged`) and returns its level list, level 0
+    /// (`asset`, the stored GLB) first.
+    fn list_levels(
         &self,
         asset: &str,
         zero: &LevelInfo,
         chain: &Chain,
+        staged: bool,
     ) -> Result<Vec<ModelLevel>, WorldError> {
         let mut levels = vec![ModelLevel {
             asset: asset.to_owned(),
             info: zero.clone(),
         }];
         for level in &chain.levels {
+            let asset = if staged {
+                self.blobs.stage(&level.glb)?
+            } else {
+                self.blobs.put(&level.glb)?
+            };
             levels.push(ModelLevel {
-                asset: self.blobs.put(&level.glb)?,
+                asset,
                 info: level.info.clone(),
             });
         }
@@ -604,29 +615,40 @@ impl World {
                 missing.push(row.number);
             }
         }
-        let done = std::sync::atomic::AtomicUsize::new(0);
-        let failures = Mutex::new(Vec::new());
+        // In batches: every level blob of a batch made durable in one flush, then the
+        // batch's level lists recorded in one transaction.
+        let mut failures = Vec::new();
+        let mut done = 0;
         progress(0, missing.len());
-        missing.par_iter().try_for_each(|&number| {
-            let row = self.models.row(number)?;
-            let glb = self.models.glb(number)?;
-            let (zero, chain) = level_stored(&row.name, &glb)?;
-            let levels = self.store_levels(&row.asset, &zero, &chain)?;
-            self.meta.put_levels(&row.asset, &levels)?;
-            if let Some(failure) = chain.failure {
-                tracing::warn!(
-                    model = row.name,
-                    "levels of detail stopped early: {failure}"
-                );
-                if let Ok(mut f) = failures.lock() {
-                    f.push((row.name.clone(), failure));
+        for batch in missing.chunks(LEVEL_BATCH) {
+            let levelled = batch
+                .par_iter()
+                .map(|&number| {
+                    let row = self.models.row(number)?;
+                    let glb = self.models.glb(number)?;
+                    let (zero, chain) = level_stored(&row.name, &glb)?;
+                    let levels = self.list_levels(&row.asset, &zero, &chain, true)?;
+                    Ok((row, levels, chain.failure))
+                })
+                .collect::<Result<Vec<_>, WorldError>>()?;
+            self.blobs.commit_staged()?;
+            let rows: Vec<(String, Vec<ModelLevel>)> = levelled
+                .iter()
+                .map(|(row, levels, _)| (row.asset.clone(), levels.clone()))
+                .collect();
+            self.meta.put_levels_batch(&rows)?;
+            for (row, _, failure) in levelled {
+                if let Some(failure) = failure {
+                    tracing::warn!(
+                        model = row.name,
+                        "levels of detail stopped early: {failure}"
+                    );
+                    failures.push((row.name, failure));
                 }
             }
-            let n = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
-            progress(n, missing.len());
-            Ok::<(), WorldError>(())
-        })?;
-        let failures = failures.into_inner().unwrap_or_default();
+            done += batch.len();
+            progress(done, missing.len());
+        }
         Ok((missing.len(), failures))
     }
 

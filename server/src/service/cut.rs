@@ -147,7 +147,14 @@ impl Decisions {
             let Some(m) = self.models.get(r.model() as usize).and_then(Option::as_ref) else {
                 return level == 0;
             };
-            level_at(m, &r, eye, self.pixel_angle, self.max_pixel_error, Some(level)) == level
+            level_at(
+                m,
+                &r,
+                eye,
+                self.pixel_angle,
+                self.max_pixel_error,
+                Some(level),
+            ) == level
         };
         if !self.levels.iter().all(level_holds) {
             return false;
@@ -625,7 +632,14 @@ impl<'a> Planner<'a> {
         let held = tree
             .world_id(o)
             .and_then(|id| self.held_levels.get(&id).copied());
-        level_at(m, &r, self.eye, self.pixel_angle, self.view.max_pixel_error, held)
+        level_at(
+            m,
+            &r,
+            self.eye,
+            self.pixel_angle,
+            self.view.max_pixel_error,
+            held,
+        )
     }
 
     /// The root, expanded at once wherever no aggregate can draw it.

@@ -191,6 +191,8 @@ pub trait MetaStore: Send + Sync + std::fmt::Debug {
     fn all_levels(&self) -> Result<std::collections::HashMap<String, Vec<ModelLevel>>, WorldError>;
     /// Records the levels of detail of a stored GLB (their blobs are durable before).
     fn put_levels(&self, asset: &str, levels: &[ModelLevel]) -> Result<(), WorldError>;
+    /// Records the levels of detail of many stored GLBs in one transaction.
+    fn put_levels_batch(&self, rows: &[(String, Vec<ModelLevel>)]) -> Result<(), WorldError>;
 
     /// Applies `mutations` in order as one transaction, each making the next generation, for
     /// `user` (`None`: the world itself, which owns every object and has no quota). A user

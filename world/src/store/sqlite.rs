@@ -286,6 +286,15 @@ impl MetaStore for SqliteMeta {
         insert_levels(&db, asset, levels)
     }
 
+    fn put_levels_batch(&self, rows: &[(String, Vec<ModelLevel>)]) -> Result<(), WorldError> {
+        let mut db = self.lock()?;
+        let tx = db.transaction().map_err(sql)?;
+        for (asset, levels) in rows {
+            insert_levels(&tx, asset, levels)?;
+        }
+        tx.commit().map_err(sql)
+    }
+
     fn apply(
         &self,
         user: Option<&str>,
