@@ -58,6 +58,13 @@ const SCALE_SAMPLE_SEED: u64 = 0x5CA1E;
 /// replays at most about this many.
 pub const SNAPSHOT_EVERY: u64 = 10_000;
 
+/// What ingest derived from a model, stored with its row when given.
+#[derive(Clone, Copy, Default)]
+struct Derived<'a> {
+    descriptors: Option<&'a ModelDescriptors>,
+    levels: Option<&'a (LevelInfo, Chain)>,
+}
+
 /// Models levelled per batch by [`World::level_models`]: their blobs made durable in one
 /// flush, their level lists recorded in one transaction.
 const LEVEL_BATCH: usize = 128;
@@ -245,7 +252,7 @@ impl World {
                 .collect::<Result<_, WorldError>>()?;
             for (model_name, glb, stats) in &stored {
                 let row = world
-                    .store_model(glb, glb, model_name, None, stats, None, None)?
+                    .store_model(glb, glb, model_name, None, stats, Derived::default())?
                     .0;
                 numbers.push(row.number);
             }
@@ -452,9 +459,12 @@ impl World {
         name: &str,
         owner: Option<&str>,
         stats: &serde_json::Value,
-        descriptors: Option<&ModelDescriptors>,
-        levels: Option<&(LevelInfo, Chain)>,
+        derived: Derived<'_>,
     ) -> Result<(ModelRow, bool), WorldError> {
+        let Derived {
+            descriptors,
+            levels,
+        } = derived;
         let _storing = self
             .storing
             .lock()
@@ -555,8 +565,10 @@ impl World {
             name,
             Some(owner),
             &stats(&ingested.mesh),
-            described.as_ref(),
-            levels.as_ref(),
+            Derived {
+                descriptors: described.as_ref(),
+                levels: levels.as_ref(),
+            },
         )
     }
 
