@@ -5,7 +5,13 @@
   3. every aggregate has exactly one material and one texture, read from the GLB's own JSON
      chunk here (not by Horizon's code), and that texture is at most 128 KiB;
   4. the published manifest names an aggregate for every node of the tree (as many as the build
-     reported), and every blob it names exists.
+     reported), and every blob it names exists;
+  5. every model's levels of detail: each level's GLB passes the validator and has the
+     triangles its row states (instances expanded, counted by gltf_reference), level 0 is the
+     model's stored GLB, and along each chain the error does not fall while triangles do not
+     rise and bytes fall. trimesh loads every level it can read: it has no decoder for
+     EXT_meshopt_compression, so a compressed level is loaded by three.js in the browser tests
+     (tests/web) instead.
 
 The world's published record is read from its SQLite database with Python's own sqlite3 module,
 and the manifest and aggregates from its blob folder (blobs/ab/<hash>), not through Horizon.
@@ -61,6 +67,52 @@ def published_manifest(world):
     return json.loads(blob(world, json.loads(value)["manifest"]).read_bytes())
 
 
+def model_levels(world):
+    """Every stored model's level list, from world.db's levels table."""
+    db = sqlite3.connect(f"file:{world / 'world.db'}?mode=ro", uri=True)
+    try:
+        models = dict(db.execute("SELECT asset, name FROM models").fetchall())
+        rows = db.execute("SELECT asset, levels FROM levels").fetchall()
+    finally:
+        db.close()
+    return models, {asset: json.loads(text) for asset, text in rows}
+
+
+def check_levels(check, validate_mjs, world):
+    """Check 5; returns how many level GLBs were checked."""
+    models, levels = model_levels(world)
+    check("every model has levels", set(models) <= set(levels),
+          f"{len(set(models) - set(levels))} models without")
+    copies = tempfile.TemporaryDirectory()
+    files = []
+    for asset, chain in sorted(levels.items()):
+        check(f"level 0 is the model {asset}", chain and chain[0]["asset"] == asset)
+        for before, after in zip(chain, chain[1:]):
+            ok = (after["error"] >= before["error"] and after["triangles"] <= before["triangles"]
+                  and after["bytes"] < before["bytes"])
+            check(f"chain of {models.get(asset, asset)}", ok, f"{before} then {after}")
+        for k, level in enumerate(chain[1:], start=1):
+            f = pathlib.Path(copies.name) / f"{level['asset']}.glb"
+            if not f.exists():
+                shutil.copyfile(blob(world, level["asset"]), f)
+                files.append((f, level["triangles"], f"{models.get(asset, asset)} level {k}"))
+    ref.check_valid(check, validate_mjs, [f for f, _, _ in files])
+    for f, triangles, name in files:
+        try:
+            asset = ref.Asset(f)
+            expanded = ref.expanded_triangles(asset)
+            check(f"triangles of {name}", expanded == triangles, f"{expanded} against {triangles}")
+            if "EXT_meshopt_compression" in asset.doc.get("extensionsUsed", []):
+                continue
+            scene = trimesh.load(f, force="scene")
+            tris = sum(len(g.faces) for g in scene.geometry.values())
+            check(f"trimesh {name}", tris > 0, f"{tris} triangles")
+        except Exception as e:  # noqa: BLE001 - any loader failure is a failed check
+            check(f"trimesh {name}", False, repr(e))
+    copies.cleanup()
+    return len(files)
+
+
 def blob(world, hash_):
     return world / "blobs" / hash_[:2] / hash_
 
@@ -107,6 +159,8 @@ def main(horizon, validate_mjs, world, nodes=None):
             check(f"trimesh {f.name}", False, repr(e))
     copies.cleanup()
     print(f"{len(files)} aggregates checked, validator errors {errors}")
+    # 5. Levels of detail.
+    print(f"{check_levels(check, validate_mjs, world)} levels of detail checked")
     print(f"{passed} passed, {failed} failed")
     return 1 if failed else 0
 
