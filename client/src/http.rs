@@ -73,6 +73,7 @@ pub(crate) fn cut_query(view: &View) -> Vec<(&'static str, String)> {
         ("eye", format!("{x},{y},{z}")),
         ("min_solid_angle", view.min_solid_angle.to_string()),
         ("pixel_solid_angle", view.pixel_solid_angle.to_string()),
+        ("max_pixel_error", view.max_pixel_error.to_string()),
     ];
     let b = &view.budgets;
     for (name, value) in [
@@ -184,6 +185,7 @@ mod tests {
             eye: [1.5, -0.1, 1e20],
             min_solid_angle: 1e-3,
             pixel_solid_angle: 3.0e-7,
+            max_pixel_error: 0.5,
             budgets: Budgets {
                 max_entries: Some(10),
                 max_triangles: Some(7),
@@ -198,6 +200,7 @@ mod tests {
                 "eye",
                 "min_solid_angle",
                 "pixel_solid_angle",
+                "max_pixel_error",
                 "max_entries",
                 "max_triangles"
             ]
@@ -210,7 +213,8 @@ mod tests {
         assert_eq!(eye, view.eye);
         assert_eq!(query[1].1.parse::<f64>().ok(), Some(1e-3));
         assert_eq!(query[2].1.parse::<f64>().ok(), Some(3.0e-7));
-        assert_eq!(query[3].1, "10");
+        assert_eq!(query[3].1.parse::<f64>().ok(), Some(0.5));
+        assert_eq!(query[4].1, "10");
     }
 
     #[test]

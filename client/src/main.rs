@@ -143,6 +143,9 @@ struct ViewArgs {
     /// Solid angle of one pixel, steradians.
     #[arg(long)]
     pixel_solid_angle: Option<f64>,
+    /// Most geometric error an object's level of detail may show, pixels (0: full detail).
+    #[arg(long)]
+    max_pixel_error: Option<f64>,
     /// Most entries.
     #[arg(long)]
     max_entries: Option<u64>,
@@ -169,6 +172,9 @@ impl ViewArgs {
         }
         if let Some(a) = self.pixel_solid_angle {
             view.pixel_solid_angle = a;
+        }
+        if let Some(e) = self.max_pixel_error {
+            view.max_pixel_error = e;
         }
         view.budgets = Budgets {
             max_entries: self.max_entries,

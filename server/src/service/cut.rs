@@ -59,9 +59,11 @@ pub fn plan_after(
         planner.held_levels = held
             .items
             .iter()
-            .filter_map(|p| match p.key {
-                Key::Object { object, level, .. } => Some((object, level)),
-                Key::Aggregate { .. } => None,
+            .filter_map(|p| match (p.key, &p.what) {
+                (Key::Object { object, .. }, Drawn::Object { needed, .. }) => {
+                    Some((object, *needed))
+                }
+                _ => None,
             })
             .collect();
     }
@@ -283,6 +285,9 @@ pub enum Drawn {
         transform: Affine3A,
         /// The level of detail drawn.
         level: u8,
+        /// The coarsest level the object itself may be drawn at ([`ModelAsset::choose`]);
+        /// `level` is finer where another object of the model needs a finer one.
+        needed: u8,
     },
     /// The node's published aggregate (in the plan's manifest).
     Aggregate,
@@ -899,6 +904,7 @@ impl<'a> Planner<'a> {
                     model,
                     transform: r.transform(),
                     level,
+                    needed: level,
                 },
                 covers: 1,
                 pending,
@@ -940,11 +946,16 @@ impl<'a> Planner<'a> {
         }
         decisions.levels = items
             .iter()
-            .filter_map(|p| match p.key {
-                Key::Object { object, level, .. } => Some((tree.tree_id(object)?, level)),
-                Key::Aggregate { .. } => None,
+            .filter_map(|p| match (p.key, &p.what) {
+                (Key::Object { object, .. }, Drawn::Object { needed, .. }) => {
+                    Some((tree.tree_id(object)?, *needed))
+                }
+                _ => None,
             })
             .collect();
+        if self.budgets.max_triangles.is_none() {
+            share_levels(&mut items);
+        }
         Plan {
             manifest: self.served.manifest.clone(),
             models: self.models.clone(),
@@ -956,6 +967,29 @@ impl<'a> Planner<'a> {
             missing_models: missing.get(),
             view: self.view,
             decisions,
+        }
+    }
+}
+
+/// Every object of a model drawn at the finest level any of them needs: that level is
+/// downloaded anyway, so the others reuse it instead of adding a coarser one. A cut's bytes
+/// and draw calls only fall by it (one asset per model instead of one per level used), and
+/// its triangles stay at most those of the cut without levels; under a triangle budget the
+/// planner leaves every object at its own level.
+fn share_levels(items: &mut [Planned]) {
+    let mut finest: HashMap<u64, u8> = HashMap::new();
+    for p in items.iter() {
+        if let Drawn::Object { model, needed, .. } = p.what {
+            let f = finest.entry(model).or_insert(needed);
+            *f = (*f).min(needed);
+        }
+    }
+    for p in items.iter_mut() {
+        if let (Drawn::Object { model, level, .. }, Key::Object { level: key, .. }) =
+            (&mut p.what, &mut p.key)
+        {
+            *level = finest[model];
+            *key = *level;
         }
     }
 }
@@ -1047,6 +1081,7 @@ impl Plan {
                 model,
                 transform,
                 level: l,
+                ..
             } => {
                 level = u32::from(*l);
                 let m = self
@@ -1215,5 +1250,81 @@ impl Plan {
             })
             .collect();
         (additions, removals)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A chain whose error doubles and texels double in size at every level.
+    fn chain() -> ModelAsset {
+        ModelAsset {
+            levels: (0..6)
+                .map(|k| LevelAsset {
+                    hash: format!("{k}"),
+                    bytes: 1000 >> k,
+                    triangles: 4000 >> (2 * k),
+                    draw_calls: 1,
+                    error: if k == 0 { 0.0 } else { 0.01 * (1 << k) as f32 },
+                    texel: 0.005 * (1 << k) as f32,
+                })
+                .collect(),
+        }
+    }
+
+    const PIXEL: f32 = 5.5e-4;
+
+    #[test]
+    fn level_choice_is_monotone_in_distance_and_scale() {
+        let m = chain();
+        let mut last = 0;
+        let mut seen = HashSet::new();
+        for step in 0..2000 {
+            let d = 0.5 * 1.005f32.powi(step);
+            let level = m.choose(d, 1.0, PIXEL, 1.0, None);
+            assert!(level >= last, "level {level} at {d} m after {last}");
+            // The chosen level's error and texels are within a pixel; the next one's are not.
+            let footprint = d * PIXEL;
+            let l = &m.levels[level as usize];
+            assert!(l.error <= footprint && l.texel <= footprint || level == 0);
+            if let Some(next) = m.levels.get(level as usize + 1) {
+                assert!(next.error > footprint || next.texel > footprint);
+            }
+            // A larger object (scaled up) never gets a coarser level at the same distance.
+            assert!(m.choose(d, 2.0, PIXEL, 1.0, None) <= level);
+            seen.insert(level);
+            last = level;
+        }
+        assert_eq!(
+            seen.len(),
+            m.levels.len(),
+            "every level is chosen somewhere"
+        );
+    }
+
+    #[test]
+    fn no_error_allowed_is_level_zero_and_a_held_level_stays_within_the_margin() {
+        let m = chain();
+        assert_eq!(m.choose(1e6, 1.0, PIXEL, 0.0, None), 0);
+        // Just past the distance where level 2 becomes allowed: a client holding level 1
+        // keeps it until level 2 is allowed with the margin to spare.
+        let at = |level: usize| m.levels[level].error.max(m.levels[level].texel) / PIXEL;
+        let d2 = at(2);
+        assert_eq!(m.choose(d2 * 1.01, 1.0, PIXEL, 1.0, None), 2);
+        assert_eq!(m.choose(d2 * 1.01, 1.0, PIXEL, 1.0, Some(1)), 1);
+        assert_eq!(
+            m.choose(d2 * LEVEL_MARGIN * 1.01, 1.0, PIXEL, 1.0, Some(1)),
+            2
+        );
+        // Coming back, a client holding level 2 keeps it a little nearer than allowed.
+        assert_eq!(m.choose(d2 * 0.9, 1.0, PIXEL, 1.0, None), 1);
+        assert_eq!(m.choose(d2 * 0.9, 1.0, PIXEL, 1.0, Some(2)), 2);
+        assert_eq!(
+            m.choose(d2 / LEVEL_MARGIN * 0.99, 1.0, PIXEL, 1.0, Some(2)),
+            1
+        );
+        // A level the model does not have is not kept.
+        assert_eq!(m.choose(d2 * 1.01, 1.0, PIXEL, 1.0, Some(40)), 2);
     }
 }

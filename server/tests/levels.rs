@@ -1,0 +1,338 @@
+//! Levels of detail through the service (issue 28): a world of generated textured buildings
+//! in a row running 3 km away from the origin, levelled by `World::level_models`, with its
+//! aggregates published:
+//! - every model lists its levels (level 0 its stored GLB), each served, coarser down the chain;
+//! - an object entry's level rises with distance, is 0 everywhere with `max_pixel_error=0`, and
+//!   its bytes, triangles and asset are the chosen level's; cuts stay complete on random views;
+//! - over a real socket, a stream's level changes arrive as replacements (`refined` or
+//!   `coarsened`, the addition naming the entry it replaces), and its cut stays complete.
+
+// A test's `unwrap` on a request it built or a reply it checks is an assertion.
+#![allow(clippy::unwrap_used)]
+
+use std::collections::{HashMap, HashSet};
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::Duration;
+
+use axum::body::Body;
+use axum::http::{Request, StatusCode};
+use futures_util::{SinkExt, StreamExt};
+use glam::{Affine3A, Vec3};
+use horizon_aggregate::AggregateOptions;
+use horizon_protocol::{
+    ClientMessage, CutResponse, EntryKind, ModelInfo, RemoveReason, ServerMessage, View,
+};
+use horizon_server::service::{app, run, AppState, Config};
+use horizon_world::World;
+use tokio::net::TcpListener;
+use tokio_tungstenite::tungstenite::Message;
+use tower::ServiceExt;
+
+struct TempDir(PathBuf);
+
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+/// Buildings per model and models.
+const ROW: usize = 40;
+const MODELS: usize = 3;
+
+/// `MODELS` distinct buildings, each placed `ROW` times along +x from 20 m to about 3 km
+/// (spacing growing by 13% a step), levelled and aggregated.
+fn world(name: &str) -> (TempDir, Arc<World>) {
+    let dir = std::env::temp_dir().join(format!("horizon-levels-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let dir = TempDir(dir);
+    let models: Vec<(String, horizon_mesh::InstancedMesh)> = (0..MODELS)
+        .map(|i| {
+            (
+                format!("building-{i}"),
+                horizon_worldgen::distinct_building(1, i).unwrap(),
+            )
+        })
+        .collect();
+    let mut objects = Vec::new();
+    for m in 0..MODELS {
+        for k in 0..ROW {
+            let x = 20.0 * 1.13f32.powi(k as i32);
+            let z = 40.0 * m as f32;
+            objects.push((m, Affine3A::from_translation(Vec3::new(x, 0.0, z))));
+        }
+    }
+    let world = World::create(&dir.0, name, 1, &models, &objects).unwrap();
+    let (levelled, failures) = world.level_models(&|_, _| {}).unwrap();
+    assert_eq!(levelled, MODELS);
+    assert!(failures.is_empty(), "{failures:?}");
+    world
+        .rebuild_aggregates(AggregateOptions::default(), &|_| {})
+        .unwrap();
+    (dir, Arc::new(world))
+}
+
+fn state(world: &Arc<World>) -> AppState {
+    AppState::new(
+        world.clone(),
+        Config {
+            rebuild: false,
+            ..Config::default()
+        },
+    )
+}
+
+async fn get(app: &axum::Router, uri: &str) -> (StatusCode, Vec<u8>) {
+    let r = app
+        .clone()
+        .oneshot(Request::get(uri).body(Body::empty()).unwrap())
+        .await
+        .unwrap();
+    let status = r.status();
+    let bytes = axum::body::to_bytes(r.into_body(), usize::MAX)
+        .await
+        .unwrap();
+    (status, bytes.to_vec())
+}
+
+async fn cut(app: &axum::Router, query: &str) -> CutResponse {
+    let (status, body) = get(app, &format!("/v1/cut?{query}")).await;
+    assert_eq!(status, StatusCode::OK, "{query}");
+    serde_json::from_slice(&body).unwrap()
+}
+
+async fn models(app: &axum::Router) -> HashMap<String, ModelInfo> {
+    let (status, body) = get(app, "/v1/models").await;
+    assert_eq!(status, StatusCode::OK);
+    let page: horizon_protocol::ModelPage = serde_json::from_slice(&body).unwrap();
+    page.models
+        .into_iter()
+        .map(|m| (m.asset.clone(), m))
+        .collect()
+}
+
+/// `o:<id>@<placed>[/<level>]` -> id.
+fn object_of(id: &str) -> u64 {
+    id[2..id.find('@').unwrap()].parse().unwrap()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn models_list_their_levels_and_every_level_is_served() {
+    let (_dir, world) = world("list");
+    let app = app(state(&world));
+    let models = models(&app).await;
+    assert_eq!(models.len(), MODELS);
+    for m in models.values() {
+        assert!(m.levels.len() >= 2, "{}: {} levels", m.name, m.levels.len());
+        assert_eq!(m.levels[0].asset, m.asset);
+        assert_eq!(m.levels[0].bytes, m.bytes);
+        assert_eq!(m.levels[0].error, 0.0);
+        for (k, pair) in m.levels.windows(2).enumerate() {
+            let (a, b) = (&pair[0], &pair[1]);
+            assert_eq!(b.level as usize, k + 1);
+            assert!(b.error >= a.error && b.triangles <= a.triangles && b.bytes < a.bytes);
+        }
+        for l in &m.levels {
+            let (status, body) = get(&app, &format!("/assets/{}", l.asset)).await;
+            assert_eq!(status, StatusCode::OK);
+            assert_eq!(body.len() as u64, l.bytes);
+        }
+        // The model's own page says the same.
+        let (status, body) = get(&app, &format!("/v1/models/{}", m.id)).await;
+        assert_eq!(status, StatusCode::OK);
+        let one: ModelInfo = serde_json::from_slice(&body).unwrap();
+        assert_eq!(&one, m);
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn levels_rise_with_distance_and_cuts_stay_complete() {
+    let (_dir, world) = world("choice");
+    let app = app(state(&world));
+    let models = models(&app).await;
+    // Every object as itself: the levels alone decide what is sent. Under a triangle budget
+    // each object is at its own level.
+    let all = "min_solid_angle=1e-9&max_entries=100000";
+    let c = cut(&app, &format!("eye=0,2,0&{all}&max_triangles=1000000000")).await;
+    assert_eq!(c.entries.len(), MODELS * ROW);
+    let mut by_model: HashMap<u64, Vec<(f32, u32)>> = HashMap::new();
+    for e in &c.entries {
+        assert_eq!(e.kind, EntryKind::Object);
+        // The entry is its level: asset, bytes and triangles.
+        let m = &models
+            .values()
+            .find(|m| m.levels.iter().any(|l| l.asset == e.assets[0].hash))
+            .expect("an asset of some model's levels");
+        let l = &m.levels[e.level as usize];
+        assert_eq!(e.assets[0].hash, l.asset, "{}", e.id);
+        assert_eq!((e.bytes, e.triangles), (l.bytes, l.triangles), "{}", e.id);
+        assert_eq!(e.id.ends_with(&format!("/{}", e.level)), e.level > 0);
+        let distance = Vec3::from_array(e.center).length();
+        by_model
+            .entry(m.levels.len() as u64 * 1000 + m.bytes)
+            .or_default()
+            .push((distance, e.level));
+    }
+    let mut levels_seen = HashSet::new();
+    for row in by_model.values_mut() {
+        row.sort_by(|a, b| a.0.total_cmp(&b.0));
+        for pair in row.windows(2) {
+            assert!(pair[1].1 >= pair[0].1, "level falls with distance: {row:?}");
+        }
+        levels_seen.extend(row.iter().map(|r| r.1));
+    }
+    assert!(levels_seen.contains(&0), "the nearest are at full detail");
+    assert!(levels_seen.len() >= 3, "levels used: {levels_seen:?}");
+    // No error allowed: full detail throughout.
+    let full = cut(&app, &format!("eye=0,2,0&{all}&max_pixel_error=0")).await;
+    assert!(full.entries.iter().all(|e| e.level == 0));
+    // Without a triangle budget, the objects of a model share the finest level any of them
+    // needs: one asset per model, never more bytes than without levels, and fewer from afar.
+    let bytes = |c: &CutResponse| {
+        let unique: HashMap<&str, u64> = c
+            .entries
+            .iter()
+            .map(|e| (e.assets[0].hash.as_str(), e.bytes))
+            .collect();
+        assert_eq!(unique.len(), MODELS);
+        unique.values().sum::<u64>()
+    };
+    for x in [0.0, -500.0, -5000.0] {
+        let shared = cut(&app, &format!("eye={x},2,0&{all}")).await;
+        let full = cut(&app, &format!("eye={x},2,0&{all}&max_pixel_error=0")).await;
+        let own = cut(&app, &format!("eye={x},2,0&{all}&max_triangles=1000000000")).await;
+        let finest: HashMap<String, u32> = own.entries.iter().fold(HashMap::new(), |mut f, e| {
+            let m = models
+                .values()
+                .find(|m| m.levels.iter().any(|l| l.asset == e.assets[0].hash))
+                .unwrap();
+            let slot = f.entry(m.id.clone()).or_insert(e.level);
+            *slot = (*slot).min(e.level);
+            f
+        });
+        assert!(bytes(&shared) <= bytes(&full));
+        let mut levels: Vec<u32> = shared.entries.iter().map(|e| e.level).collect();
+        levels.sort_unstable();
+        let mut expected: Vec<u32> = finest.values().flat_map(|&l| [l; ROW]).collect();
+        expected.sort_unstable();
+        assert_eq!(levels, expected, "from x = {x}");
+        if x < -1000.0 {
+            assert!(bytes(&shared) < bytes(&full), "from x = {x}");
+        }
+    }
+    // Random views at the default solid angle: complete, every asset stored.
+    let mut rng = horizon_mesh::rng::Rng::new(3);
+    for _ in 0..30 {
+        let eye = [
+            -200.0 + 3400.0 * rng.unit_f64(),
+            1.0 + 300.0 * rng.unit_f64(),
+            -300.0 + 600.0 * rng.unit_f64(),
+        ];
+        let c = cut(&app, &format!("eye={},{},{}", eye[0], eye[1], eye[2])).await;
+        let ids: HashSet<&str> = c.entries.iter().map(|e| e.id.as_str()).collect();
+        assert_eq!(ids.len(), c.entries.len());
+        assert_eq!(c.entries.iter().map(|e| e.covers).sum::<u64>(), c.objects);
+        assert_eq!(c.objects, (MODELS * ROW) as u64);
+        for e in &c.entries {
+            let (status, _) = get(&app, &format!("/assets/{}", e.assets[0].hash)).await;
+            assert_eq!(status, StatusCode::OK, "{}", e.id);
+        }
+    }
+}
+
+type Ws =
+    tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>>;
+
+/// The next message, or none if the server sends nothing for `wait` (it had nothing to say).
+async fn next(ws: &mut Ws, wait: Duration) -> Option<ServerMessage> {
+    loop {
+        let m = tokio::time::timeout(wait, ws.next()).await.ok()?;
+        if let Message::Text(t) = m.expect("the stream is open").expect("a frame") {
+            return Some(serde_json::from_str(&t).unwrap());
+        }
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_stream_sends_level_changes_as_replacements() {
+    let (_dir, world) = world("stream");
+    let listener = TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let addr = listener.local_addr().unwrap();
+    let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
+    tokio::spawn(run(listener, state(&world), async move {
+        let _ = stopped.await;
+    }));
+    let (mut ws, _) = tokio_tungstenite::connect_async(format!("ws://{addr}/v1/stream"))
+        .await
+        .unwrap();
+    let mut view = View::at([0.0, 2.0, 40.0]);
+    view.min_solid_angle = 1e-9;
+    view.budgets.max_entries = Some(100_000);
+    let mut held: HashMap<String, horizon_protocol::Entry> = HashMap::new();
+    let mut changes: HashMap<RemoveReason, usize> = HashMap::new();
+    // Out along the row and back again.
+    let path: Vec<f64> = (0..12)
+        .map(|i| -100.0 * 1.5f64.powi(i))
+        .chain((0..12).rev().map(|i| -100.0 * 1.5f64.powi(i)))
+        .collect();
+    for (id, x) in path.into_iter().enumerate() {
+        view.eye[0] = x;
+        let message = ClientMessage::View {
+            id: id as u64 + 1,
+            view,
+        };
+        ws.send(Message::Text(
+            serde_json::to_string(&message).unwrap().into(),
+        ))
+        .await
+        .unwrap();
+        // Whatever the server says until it falls quiet (a bound against hanging, not a
+        // timing assertion: a late message is applied with the next view's).
+        let wait = if id == 0 { 30_000 } else { 700 };
+        while let Some(m) = next(&mut ws, Duration::from_millis(wait)).await {
+            match m {
+                ServerMessage::Reset { entries, .. } => {
+                    held = entries.into_iter().map(|e| (e.id.clone(), e)).collect();
+                }
+                ServerMessage::Delta { add, remove, .. } => {
+                    let mut gone: HashMap<String, horizon_protocol::Entry> = HashMap::new();
+                    for r in &remove {
+                        let e = held.remove(&r.id).expect("removes what it sent");
+                        gone.insert(r.id.clone(), e);
+                    }
+                    for a in add {
+                        for r in &a.replaces {
+                            let old = gone.get(r).expect("replaces what it removed");
+                            let reason = remove.iter().find(|x| &x.id == r).unwrap().reason;
+                            if old.kind == EntryKind::Object
+                                && a.entry.kind == EntryKind::Object
+                                && object_of(&old.id) == object_of(&a.entry.id)
+                            {
+                                // One object at another level: the reason says which way.
+                                assert_ne!(old.level, a.entry.level);
+                                let expected = if a.entry.level > old.level {
+                                    RemoveReason::Coarsened
+                                } else {
+                                    RemoveReason::Refined
+                                };
+                                assert_eq!(reason, expected, "{} -> {}", old.id, a.entry.id);
+                                *changes.entry(reason).or_default() += 1;
+                            }
+                        }
+                        held.insert(a.entry.id.clone(), a.entry);
+                    }
+                    let covers: u64 = held.values().map(|e| e.covers).sum();
+                    assert_eq!(covers, (MODELS * ROW) as u64, "the held cut is complete");
+                }
+                ServerMessage::Error { error } => panic!("{error:?}"),
+            }
+        }
+    }
+    assert!(
+        changes.get(&RemoveReason::Coarsened).copied().unwrap_or(0) > 0
+            && changes.get(&RemoveReason::Refined).copied().unwrap_or(0) > 0,
+        "level changes: {changes:?}"
+    );
+    let _ = stop.send(());
+}
