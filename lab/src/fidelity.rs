@@ -509,9 +509,12 @@ fn cost(entries: &[Entry]) -> Cost {
     let mut out = Cost::default();
     for e in entries {
         out.triangles += e.triangles;
+        // A preview (an object's coarsest level, for progressive loading) is not what the
+        // entry draws once loaded: it is left out, as the entry's `bytes` leave it out.
         let fresh: Vec<_> = e
             .assets
             .iter()
+            .filter(|a| a.role != horizon_protocol::AssetRole::Preview)
             .filter(|a| seen.insert(a.hash.clone()))
             .collect();
         out.bytes += fresh.iter().map(|a| a.bytes).sum::<u64>();

@@ -20,10 +20,10 @@
 //!    model unit, over the textured surface);
 //! 4. **encode**: the GLB a client downloads, the smaller of two encodings: as aggregates
 //!    are written (instances in EXT_mesh_gpu_instancing, short normals, UVs and rotations,
-//!    16-bit positions wherever they stay within [`QUANTIZATION_SHARE`] of the level's
-//!    error), or quantized over each submesh's box and meshopt-compressed (positions 16-bit
-//!    over the part's box: under a millimetre on a 20 m part); a level that saves less than
-//!    [`LevelOptions::min_saving`] of the previous level's bytes ends the chain.
+//!    16-bit positions wherever they stay within the model's diagonal over 65,535), or
+//!    quantized over each submesh's box and meshopt-compressed (16-bit positions: under a
+//!    millimetre on a 20 m part); a level's error counts that quantization too. A level that
+//!    saves less than [`LevelOptions::min_saving`] of the previous level's bytes is not kept.
 //!
 //! The chain ends when neither geometry nor textures can be reduced. Geometry and texture
 //! reductions go together, one level for both: a level is one GLB.
@@ -33,10 +33,6 @@ use horizon_mesh::{export_glb, ExportOptions, InstancedMesh, Texture};
 use horizon_simplify::distance::{hausdorff_instanced, DistanceOptions};
 use horizon_simplify::{simplify, SimplifyOptions, Target};
 use serde::{Deserialize, Serialize};
-
-/// Quantized positions stay within this share of their level's error of where floats put
-/// them.
-pub const QUANTIZATION_SHARE: f64 = 0.25;
 
 /// A simplification that removes whole parts holding more than this share of the model's
 /// area has not simplified the model but dropped what shows: it counts as stalled.
@@ -134,6 +130,7 @@ pub fn build_chain(model: &InstancedMesh, bytes: u64, options: &LevelOptions) ->
     let mut geometry_done = previous_info.triangles <= options.floor_triangles;
     let mut textures_done = false;
     let diagonal = model.bounds().diagonal();
+    let quantization = f64::from(diagonal) / 65535.0;
     let distance = DistanceOptions {
         samples: options.distance_samples,
         seed: 0,
@@ -141,10 +138,10 @@ pub fn build_chain(model: &InstancedMesh, bytes: u64, options: &LevelOptions) ->
     // Stage 0: the model itself in the compact encoding, when that alone saves enough. Its
     // error is what quantization may move a vertex: half a 16-bit step along each axis of a
     // part's box, at most the model's diagonal over 65,535.
-    match encode(model, 0.0, diagonal) {
+    match encode(model, diagonal) {
         Ok(glb) if glb.len() as f64 <= (1.0 - options.min_saving) * bytes as f64 => {
             let info = LevelInfo {
-                error: f64::from(diagonal) / 65535.0,
+                error: quantization,
                 bytes: glb.len() as u64,
                 ..previous_info.clone()
             };
@@ -159,6 +156,7 @@ pub fn build_chain(model: &InstancedMesh, bytes: u64, options: &LevelOptions) ->
     }
     let mut last_bytes = previous_info.bytes;
     let mut pixels: Vec<Option<image::RgbaImage>> = vec![None; model.textures.len()];
+    let mut masks = masks_of(model);
     let mut steps = 0;
     while chain.levels.len() < options.max_levels && steps < 4 * options.max_levels {
         steps += 1;
@@ -200,8 +198,12 @@ pub fn build_chain(model: &InstancedMesh, bytes: u64, options: &LevelOptions) ->
             textures.clear();
         }
         let mut next_pixels = pixels.clone();
-        let halved = match halve_textures(&mut textures, &mut next_pixels, options.min_texture_side)
-        {
+        let halved = match halve_textures(
+            &mut textures,
+            &mut next_pixels,
+            &mut masks,
+            options.min_texture_side,
+        ) {
             Ok(halved) => halved && !textures_done,
             Err(e) => {
                 chain.failure = Some(format!("a texture could not be resampled: {e}"));
@@ -227,11 +229,13 @@ pub fn build_chain(model: &InstancedMesh, bytes: u64, options: &LevelOptions) ->
             _ if halved => (from.clone(), previous_info.error),
             _ => break,
         };
+        // What quantization may add (see `encode`), once: the first level carries it.
+        let error = error.max(quantization);
         if !textures_done {
             mesh.textures = textures;
         }
         // Stage 4: encode.
-        let encoded = encode(&mesh, error, diagonal);
+        let encoded = encode(&mesh, diagonal);
         let glb = match encoded {
             Ok(glb) => glb,
             Err(e) => {
@@ -271,20 +275,16 @@ pub fn build_chain(model: &InstancedMesh, bytes: u64, options: &LevelOptions) ->
     chain
 }
 
-/// A level's GLB: the smaller of the two encodings (see the module docs), positions within
-/// [`QUANTIZATION_SHARE`] of `error` (or a hundred-thousandth of the `diagonal`).
-fn encode(
-    mesh: &InstancedMesh,
-    error: f64,
-    diagonal: f32,
-) -> Result<Vec<u8>, horizon_mesh::ExportError> {
+/// A level's GLB: the smaller of the two encodings (see the module docs). Either moves a
+/// position by at most the model's `diagonal` over 65,535: 16-bit positions over a part's box
+/// (half a step per axis), or positions kept within that tolerance.
+fn encode(mesh: &InstancedMesh, diagonal: f32) -> Result<Vec<u8>, horizon_mesh::ExportError> {
     let c = export_glb(mesh, &ExportOptions::compressed())?;
     // The instanced encoding can only win where parts are placed more than once.
     if mesh.instances.len() <= mesh.submeshes.len() {
         return Ok(c);
     }
-    let tolerance = (QUANTIZATION_SHARE * error).max(1e-5 * f64::from(diagonal)) as f32;
-    let a = export_glb(mesh, &ExportOptions::aggregate(tolerance))?;
+    let a = export_glb(mesh, &ExportOptions::aggregate(diagonal / 65535.0))?;
     Ok(if c.len() < a.len() { c } else { a })
 }
 
@@ -323,21 +323,88 @@ fn dropped_area(mesh: &InstancedMesh, kept: &[Option<usize>]) -> f64 {
 /// any was.
 /// `pixels` holds each texture's decoded texels when known (they are kept for the next
 /// halving, so that no level decodes what the one before it encoded).
+/// A texture an alpha-masked material uses keeps its coverage: the share of texels at or
+/// above `masks[t]`'s cut-off is level 0's at every level (alpha scaled after the box filter,
+/// as in Castaño's "alpha to coverage" mipmaps), so a fence's pickets do not thin away.
 fn halve_textures(
     textures: &mut [Texture],
     pixels: &mut [Option<image::RgbaImage>],
+    masks: &mut [Option<Mask>],
     min_side: u32,
 ) -> Result<bool, image::ImageError> {
     let mut any = false;
-    for (texture, decoded) in textures.iter_mut().zip(pixels) {
+    for ((texture, decoded), mask) in textures.iter_mut().zip(pixels).zip(masks) {
         let (w, h) = texture.size;
         if w.max(h) <= min_side {
             continue;
         }
-        *texture = halved(texture, decoded)?;
+        if let Some(mask) = mask.as_mut().filter(|m| m.coverage.is_none()) {
+            let image = match decoded.take() {
+                Some(image) => image,
+                None => texture.decode()?,
+            };
+            mask.coverage = Some(coverage(&image, mask.cutoff, 1.0));
+            *decoded = Some(image);
+        }
+        *texture = halved(texture, decoded, mask.as_ref())?;
         any = true;
     }
     Ok(any)
+}
+
+/// An alpha-masked texture's cut-off and level 0's coverage at it.
+#[derive(Clone, Copy, Debug)]
+struct Mask {
+    cutoff: f32,
+    coverage: Option<f64>,
+}
+
+/// The masks of `mesh`'s textures: the cut-off of the first alpha-masked material using each.
+fn masks_of(mesh: &InstancedMesh) -> Vec<Option<Mask>> {
+    let mut out = vec![None; mesh.textures.len()];
+    for m in &mesh.materials {
+        if let (horizon_mesh::AlphaMode::Mask { cutoff }, Some(t)) =
+            (m.alpha_mode, m.base_color_texture)
+        {
+            if let Some(slot) = out.get_mut(t.texture) {
+                slot.get_or_insert(Mask {
+                    cutoff,
+                    coverage: None,
+                });
+            }
+        }
+    }
+    out
+}
+
+/// The share of `image`'s texels whose alpha, times `scale`, is at least `cutoff`.
+fn coverage(image: &image::RgbaImage, cutoff: f32, scale: f32) -> f64 {
+    let bar = cutoff * 255.0;
+    let above = image
+        .pixels()
+        .filter(|p| f32::from(p.0[3]) * scale >= bar)
+        .count();
+    above as f64 / (image.width() as f64 * image.height() as f64).max(1.0)
+}
+
+/// Scales `image`'s alpha so that its coverage at `mask.cutoff` is `mask.coverage`.
+fn keep_coverage(image: &mut image::RgbaImage, mask: &Mask) {
+    let Some(target) = mask.coverage else {
+        return;
+    };
+    // Coverage rises with the scale: bisect for the scale that meets the target.
+    let (mut lo, mut hi) = (0.25f32, 4.0f32);
+    for _ in 0..16 {
+        let mid = 0.5 * (lo + hi);
+        if coverage(image, mask.cutoff, mid) < target {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    for p in image.pixels_mut() {
+        p.0[3] = (f32::from(p.0[3]) * hi).round().min(255.0) as u8;
+    }
 }
 
 /// A texture at half its size along both sides (at least one texel); `decoded` holds its
@@ -345,12 +412,16 @@ fn halve_textures(
 fn halved(
     texture: &Texture,
     decoded: &mut Option<image::RgbaImage>,
+    mask: Option<&Mask>,
 ) -> Result<Texture, image::ImageError> {
     let image = match decoded.take() {
         Some(image) => image,
         None => texture.decode()?,
     };
-    let small = half_box(&image);
+    let mut small = half_box(&image);
+    if let Some(mask) = mask {
+        keep_coverage(&mut small, mask);
+    }
     let (w, h) = small.dimensions();
     *decoded = Some(small.clone());
     let mut bytes = Vec::new();

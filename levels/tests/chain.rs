@@ -167,3 +167,84 @@ fn mirrored_and_sheared_placements_keep_their_winding_at_every_level() {
         );
     }
 }
+
+#[test]
+fn alpha_masked_textures_keep_their_coverage_down_the_chain() {
+    use horizon_mesh::{AlphaMode, Material, Texture, TextureRef, Wrap};
+    // Leaves: smooth blobs of every size, opaque where a sum of waves is high, on a quad.
+    let side = 512;
+    let image = image::RgbaImage::from_fn(side, side, |x, y| {
+        let shade = ((x * 7919 + y * 104_729) % 61) as u8;
+        let (x, y) = (x as f32, y as f32);
+        let f = (x * 0.21).sin() + (y * 0.17).sin() + ((x + y) * 0.13).sin() + (x * 0.05).cos();
+        image::Rgba([90 + shade, 140, 60 + shade, if f > 0.8 { 255 } else { 0 }])
+    });
+    let mut png = Vec::new();
+    image
+        .write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
+        .unwrap();
+    let coverage = |img: &image::RgbaImage| {
+        img.pixels().filter(|p| p.0[3] >= 128).count() as f64
+            / f64::from(img.width() * img.height())
+    };
+    let quad = Submesh {
+        positions: vec![
+            Vec3::ZERO,
+            Vec3::X * 4.0,
+            Vec3::new(4.0, 4.0, 0.0),
+            Vec3::Y * 4.0,
+        ],
+        uvs: Some(vec![
+            glam::Vec2::new(0.0, 1.0),
+            glam::Vec2::new(1.0, 1.0),
+            glam::Vec2::new(1.0, 0.0),
+            glam::Vec2::new(0.0, 0.0),
+        ]),
+        indices: vec![0, 1, 2, 0, 2, 3],
+        material: Some(0),
+        ..Submesh::default()
+    };
+    let mesh = InstancedMesh {
+        submeshes: vec![quad],
+        instances: vec![Instance {
+            submesh: 0,
+            transform: Affine3A::IDENTITY,
+        }],
+        materials: vec![Material {
+            base_color_texture: Some(TextureRef {
+                texture: 0,
+                transform: None,
+            }),
+            alpha_mode: AlphaMode::Mask { cutoff: 0.5 },
+            ..Material::default()
+        }],
+        textures: vec![Texture {
+            bytes: png,
+            mime_type: "image/png".into(),
+            size: (side, side),
+            wrap_u: Wrap::Repeat,
+            wrap_v: Wrap::Repeat,
+        }],
+    };
+    mesh.validate().unwrap();
+    let (_, chain) = chain_of(&mesh);
+    let full = coverage(&image);
+    let mut halvings = 0;
+    for level in &chain.levels {
+        let back = import_bytes(&level.glb, Format::Glb, None, &ImportOptions::trusted())
+            .unwrap()
+            .mesh;
+        let texels = back.textures[0].decode().unwrap();
+        if texels.width() < side {
+            halvings += 1;
+        }
+        let c = coverage(&texels);
+        assert!(
+            (c - full).abs() < 0.03,
+            "{}x{}: coverage {c} against {full}",
+            texels.width(),
+            texels.height()
+        );
+    }
+    assert!(halvings >= 2, "only {halvings} levels halve the texture");
+}

@@ -190,6 +190,9 @@ pub enum AssetRole {
     Model,
     /// An orthoview image.
     Orthoview,
+    /// An object's coarsest level of detail, which a client may draw until the entry's own
+    /// level has loaded (progressive loading); not counted in the entry's `bytes`.
+    Preview,
 }
 
 /// A blob an entry needs, served at `/assets/{hash}`.

@@ -107,18 +107,28 @@ export function views(bounds, seed = 1, street = 2) {
   return out;
 }
 
-/** The one-shot cut (`GET /v1/cut`) at the view the viewer asks for now: its entry ids. */
+/**
+ * The one-shot cut (`GET /v1/cut`) at the view the viewer asks for now: its entry ids, without
+ * an object's level of detail (`o:<id>@<placed>/<level>`: a stream keeps a level it holds
+ * within a margin, where a one-shot cut has none to keep).
+ */
 export async function cutIds(page, base) {
   const v = await page.evaluate(() => window.horizon.view());
   const q = new URLSearchParams({
     eye: v.eye.join(','),
     min_solid_angle: String(v.min_solid_angle),
     pixel_solid_angle: String(v.pixel_solid_angle),
+    max_pixel_error: String(v.max_pixel_error),
     max_entries: String(v.budgets.max_entries),
   });
   const response = await fetch(`${base}/v1/cut?${q}`);
   if (!response.ok) throw new Error(`GET /v1/cut: ${response.status} ${await response.text()}`);
-  return (await response.json()).entries.map((e) => e.id).sort();
+  return (await response.json()).entries.map((e) => withoutLevel(e.id)).sort();
+}
+
+/** An entry id without its level of detail. */
+export function withoutLevel(id) {
+  return id.startsWith('o:') ? id.replace(/\/\d+$/, '') : id;
 }
 
 /** Moves the viewer to a view and waits until it draws exactly the one-shot cut there. */
@@ -128,7 +138,7 @@ export async function goTo(page, base, eye, target, timeout = 180000) {
   for (;;) {
     await settled(page, Math.max(1000, timeout - (Date.now() - start)));
     const want = await cutIds(page, base);
-    const have = (await page.evaluate(() => window.horizon.ids())).sort();
+    const have = (await page.evaluate(() => window.horizon.ids())).map(withoutLevel).sort();
     if (want.length === have.length && want.every((id, i) => id === have[i])) return;
     if (Date.now() - start > timeout) throw new Error(`the viewer's cut never matched /v1/cut (${have.length} vs ${want.length} entries)`);
     await page.waitForTimeout(200);

@@ -36,13 +36,14 @@ export class AssetStore {
    * Asks for `hash` on behalf of `user` (an object with `center` and `radius`, used to rank the
    * request). Resolves with the loaded asset; rejects if it fails or is cancelled.
    */
-  want(hash, user) {
+  want(hash, user, { first = false } = {}) {
     let r = this.records.get(hash);
     if (!r) {
       r = new AssetRecord(hash);
       this.records.set(hash, r);
     }
     r.users.add(user);
+    if (first) r.first = true;
     r.lastUsed = ++this.clock;
     if (r.state === 'failed' || r.state === 'cancelled') {
       r.reset();
@@ -50,6 +51,11 @@ export class AssetStore {
     const promise = r.promise;
     this.pump();
     return promise;
+  }
+
+  /** Whether `hash` has loaded (and is still held). */
+  isLoaded(hash) {
+    return this.records.get(hash)?.state === 'ready';
   }
 
   /** `user` no longer needs `hash`: a request nobody wants is cancelled. */
@@ -85,22 +91,28 @@ export class AssetStore {
     }
   }
 
-  /** The queued request whose nearest user looks largest from the eye. */
+  /**
+   * The queued request whose nearest user looks largest from the eye; previews (asked for with
+   * `first`) before everything else.
+   */
   best() {
     const eye = this.eye();
     let best = null;
     let bestScore = -Infinity;
+    let bestFirst = false;
     for (const r of this.records.values()) {
       if (r.state !== 'queued') continue;
+      if (bestFirst && !r.first) continue;
       let score = -Infinity;
       for (const u of r.users) {
         const dx = u.center[0] - eye.x, dy = u.center[1] - eye.y, dz = u.center[2] - eye.z;
         const d2 = Math.max(dx * dx + dy * dy + dz * dz, 1e-6);
         score = Math.max(score, (u.radius * u.radius) / d2);
       }
-      if (score > bestScore) {
+      if ((r.first && !bestFirst) || score > bestScore) {
         bestScore = score;
         best = r;
+        bestFirst = Boolean(r.first);
       }
     }
     return best;

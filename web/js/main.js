@@ -2,7 +2,8 @@
 // standing query, draws it with load before drop, and shows what it costs.
 //
 // Query parameters: `min_solid_angle` (default 0.001 sr), `max_entries` (default 4000),
-// `cache_mb` (default 768), `antialias=0` (cheaper in software rendering), and `full`: draw every object as its model instead of the cut
+// `max_pixel_error` (default 1: the geometric error, in pixels, an object's level of detail may
+// show; 0 draws every object at full detail), `cache_mb` (default 768), `antialias=0` (cheaper in software rendering), and `full`: draw every object as its model instead of the cut
 // (the reference the fidelity test compares with).
 //
 // `window.horizon` is the surface tests and tools read (DESIGN.md, "Outputs that tools parse").
@@ -18,6 +19,7 @@ import { fullWorld } from './full.js';
 const params = new URLSearchParams(location.search);
 const MIN_SOLID_ANGLE = Number(params.get('min_solid_angle') || 0.001);
 const MAX_ENTRIES = Number(params.get('max_entries') || 4000);
+const MAX_PIXEL_ERROR = params.has('max_pixel_error') ? Number(params.get('max_pixel_error')) : 1;
 const CACHE_MB = Number(params.get('cache_mb') || 768);
 const FULL = params.has('full');
 const ANTIALIAS = params.get('antialias') !== '0';
@@ -90,6 +92,7 @@ function view() {
     eye: [p.x, p.y, p.z],
     min_solid_angle: MIN_SOLID_ANGLE,
     pixel_solid_angle: pixel * pixel,
+    max_pixel_error: MAX_PIXEL_ERROR,
     budgets: { max_entries: MAX_ENTRIES },
   };
 }

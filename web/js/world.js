@@ -8,6 +8,9 @@
 // - an entry removed before it was ever drawn hands what it was replacing on to whatever
 //   replaces it, so a chain of quick changes never opens a hole.
 //
+// An object entry whose own level of detail is not loaded yet is drawn with its model's
+// coarsest level (its `preview` asset, fetched first) in the meantime, then swapped.
+//
 // Placements of one asset are drawn as one InstancedMesh per part of the asset, across all the
 // entries that show it; mirrored placements (negative determinant) get their own, under a
 // mirroring parent, so that three.js turns the winding round.
@@ -116,9 +119,27 @@ export class World {
     const e = new Entry(data, replaces);
     this.entries.set(e.id, e);
     this.current.add(e.id);
-    const hashes = [...new Set(data.assets.filter((a) => a.role !== 'orthoview').map((a) => a.hash))];
+    const hashes = [...new Set(data.assets.filter((a) => a.role !== 'orthoview' && a.role !== 'preview').map((a) => a.hash))];
     e.waiting = hashes.length;
     e.hashes = hashes;
+    // Progressive loading: an object whose own level is not loaded yet is first drawn with its
+    // model's coarsest level (the `preview`), fetched before every entry's own level.
+    const preview = data.assets.find((a) => a.role === 'preview');
+    if (preview && hashes.length === 1 && !this.assets.isLoaded(hashes[0])) {
+      e.preview = preview.hash;
+      e.placements.set(preview.hash, e.placementsOf(hashes[0]));
+      this.assets.want(preview.hash, e, { first: true }).then(
+        (record) => {
+          if (this.entries.get(e.id) !== e || e.preview !== preview.hash || e.waiting === 0) return;
+          e.loaded.set(preview.hash, record);
+          if (e.state === 'loading') {
+            e.state = 'ready';
+            this.settle();
+          }
+        },
+        () => {},
+      );
+    }
     for (const hash of hashes) {
       this.assets.want(hash, e).then(
         (record) => {
@@ -126,8 +147,15 @@ export class World {
           e.loaded.set(hash, record);
           e.waiting--;
           if (e.waiting === 0) {
-            e.state = 'ready';
-            this.settle();
+            this.dropPreview(e);
+            if (e.state === 'loading') {
+              e.state = 'ready';
+              this.settle();
+            } else if (e.visible && e.state !== 'fading') {
+              // Drawn with its preview until now: the batches take its own level.
+              this.dirty = true;
+              this.changed = true;
+            }
           }
         },
         (error) => {
@@ -139,6 +167,14 @@ export class World {
     }
     if (hashes.length === 0) e.state = 'ready';
     return e;
+  }
+
+  /** `e` no longer draws its preview (its own level has loaded, or it goes). */
+  dropPreview(e) {
+    if (!e.preview) return;
+    e.loaded.delete(e.preview);
+    this.assets.release(e.preview, e);
+    e.preview = null;
   }
 
   retire(e, replacers) {
@@ -233,6 +269,7 @@ export class World {
       e.fadeGroup = null;
     }
     for (const hash of e.hashes) this.assets.release(hash, e);
+    this.dropPreview(e);
     if (this.entries.get(e.id) === e) this.entries.delete(e.id);
     // A fading entry is already out of the batches; the picture changes all the same.
     if (e.visible && e.state !== 'fading') this.dirty = true;
@@ -375,6 +412,8 @@ class Entry {
     this.visible = false;
     this.loaded = new Map();
     this.waiting = 0;
+    /** the hash of the preview drawn until the entry's own level loads, if any */
+    this.preview = null;
     this.hashes = [];
     this.fadeGroup = null;
     // Users of an asset are ranked by where they are.

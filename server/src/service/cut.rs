@@ -1076,6 +1076,7 @@ impl Plan {
     /// A planned entry as the wire carries it.
     pub fn entry(&self, p: &Planned) -> Entry {
         let mut level = 0;
+        let mut preview = None;
         let (kind, asset, bytes, triangles, draw_calls, matrix, role) = match &p.what {
             Drawn::Object {
                 model,
@@ -1084,11 +1085,19 @@ impl Plan {
                 ..
             } => {
                 level = u32::from(*l);
-                let m = self
-                    .models
-                    .get(*model as usize)
-                    .and_then(Option::as_ref)
-                    .map(|m| m.level(*l));
+                let asset = self.models.get(*model as usize).and_then(Option::as_ref);
+                preview = asset
+                    .and_then(|m| {
+                        m.levels
+                            .last()
+                            .filter(|_| usize::from(*l) + 1 < m.levels.len())
+                    })
+                    .map(|c| Asset {
+                        hash: c.hash.clone(),
+                        bytes: c.bytes,
+                        role: AssetRole::Preview,
+                    });
+                let m = asset.map(|m| m.level(*l));
                 (
                     EntryKind::Object,
                     m.map_or(String::new(), |m| m.hash.clone()),
@@ -1116,11 +1125,13 @@ impl Plan {
         Entry {
             id: self.id(p),
             kind,
-            assets: vec![Asset {
+            assets: std::iter::once(Asset {
                 hash: asset.clone(),
                 bytes,
                 role,
-            }],
+            })
+            .chain(preview)
+            .collect(),
             placements: vec![Placement { asset, matrix }],
             level,
             pending: p.pending,
