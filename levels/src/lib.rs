@@ -9,8 +9,9 @@
 //!    whose parts are each placed once it is the plain quadric simplifier) to about
 //!    [`LevelOptions::ratio`] of the previous level's triangles, never below
 //!    [`LevelOptions::floor_triangles`]; a simplification that keeps more than
-//!    [`LevelOptions::stall`] of its input, or that drops whole parts holding more than
-//!    [`DROPPED_AREA`] of its area, has stalled (seams and materials hold it), and the
+//!    [`LevelOptions::stall`] of its input, that drops whole parts holding more than
+//!    [`DROPPED_AREA`] of its area, or that keeps under [`SIDE_KEPT`] of the area the model
+//!    shows towards any side, has stalled (seams, materials or thin parts hold it), and the
 //!    geometry stays as it was from then on;
 //! 2. **textures**: every texture longer than [`LevelOptions::min_texture_side`] halved (a
 //!    box-filtered mip level), re-encoded in its own format;
@@ -37,6 +38,9 @@ use serde::{Deserialize, Serialize};
 /// A simplification that removes whole parts holding more than this share of the model's
 /// area has not simplified the model but dropped what shows: it counts as stalled.
 pub const DROPPED_AREA: f64 = 0.01;
+
+/// The share of the area the model shows towards each direction that a level must keep.
+pub const SIDE_KEPT: f64 = 0.9;
 
 /// A geometry step is taken with the texture step unless it makes the level usable only at
 /// more than this multiple of the distance the texture step alone would: then the level
@@ -129,6 +133,7 @@ pub fn build_chain(model: &InstancedMesh, bytes: u64, options: &LevelOptions) ->
     let mut previous_info = level_zero(model, bytes);
     let mut geometry_done = previous_info.triangles <= options.floor_triangles;
     let mut textures_done = false;
+    let full_sides = facing_areas(model);
     let diagonal = model.bounds().diagonal();
     let quantization = f64::from(diagonal) / 65535.0;
     let distance = DistanceOptions {
@@ -174,7 +179,8 @@ pub fn build_chain(model: &InstancedMesh, bytes: u64, options: &LevelOptions) ->
             ) {
                 Ok(s)
                     if (s.report.triangles_out as f64) <= options.stall * triangles as f64
-                        && dropped_area(from, &s.kept) <= DROPPED_AREA =>
+                        && dropped_area(from, &s.kept) <= DROPPED_AREA
+                        && keeps_sides(&full_sides, &facing_areas(&s.mesh)) =>
                 {
                     match hausdorff_instanced(model, &s.mesh, &distance) {
                         Ok(r) => simplified = Some((s.mesh, r.hausdorff.max(previous_info.error))),
@@ -286,6 +292,45 @@ fn encode(mesh: &InstancedMesh, diagonal: f32) -> Result<Vec<u8>, horizon_mesh::
     }
     let a = export_glb(mesh, &ExportOptions::aggregate(diagonal / 65535.0))?;
     Ok(if c.len() < a.len() { c } else { a })
+}
+
+/// The area a mesh shows towards +x, -x, +y, -y, +z and -z (each triangle's area times the
+/// cosine to the direction, where positive, every instance counted).
+fn facing_areas(mesh: &InstancedMesh) -> [f64; 6] {
+    let mut out = [0.0f64; 6];
+    for inst in &mesh.instances {
+        let sub = &mesh.submeshes[inst.submesh];
+        let flip = if inst.transform.matrix3.determinant() < 0.0 {
+            -1.0
+        } else {
+            1.0
+        };
+        for t in sub.indices.chunks_exact(3) {
+            let [a, b, c] = [0, 1, 2].map(|i| {
+                inst.transform
+                    .transform_point3(sub.positions[t[i] as usize])
+            });
+            let v = (b - a).cross(c - a) * (0.5 * flip);
+            if !v.is_finite() {
+                continue;
+            }
+            for (d, value) in [v.x, -v.x, v.y, -v.y, v.z, -v.z].into_iter().enumerate() {
+                out[d] += f64::from(value.max(0.0));
+            }
+        }
+    }
+    out
+}
+
+/// Whether a level showing `sides` keeps [`SIDE_KEPT`] of what the model (`full`) shows
+/// towards every direction that holds a fair share of the model's largest side: thin parts
+/// (a fence's rails, a tree's twigs) that simplification would thin away are within a small
+/// Hausdorff distance of what remains, but their pixels would open holes.
+fn keeps_sides(full: &[f64; 6], sides: &[f64; 6]) -> bool {
+    let largest = full.iter().copied().fold(0.0, f64::max);
+    full.iter()
+        .zip(sides)
+        .all(|(&f, &s)| f < 0.2 * largest || s >= SIDE_KEPT * f)
 }
 
 /// The share of `mesh`'s surface area in the submeshes that `kept` says lost all their
