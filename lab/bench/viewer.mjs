@@ -1,6 +1,8 @@
 // The web viewer's benchmark (the web viewer issue): for each world directory given,
 //   - time from opening `/` to the first complete view, unthrottled and at 10 Mbit/s
 //     (Chromium's network emulation, 20 ms latency), each in a fresh browser context;
+//   - the first complete view at 10 Mbit/s again without levels of detail
+//     (`?max_pixel_error=0`), the peer of the levels (with LEVELS_ONLY=1, only these);
 //   - frames per second on a seeded flight (street level to outside, 12 s, the camera moved
 //     every frame), the cut against full detail (`?full`) in the same run, as a ratio of
 //     frame times (software rendering here: only the ratio means anything);
@@ -89,10 +91,17 @@ for (const dir of dirs) {
     const bounds = (await (await fetch(`${server.url}/v1/world`)).json()).bounds;
     const open = await firstComplete(`${server.url}/`, false);
     const slow = await firstComplete(`${server.url}/`, true);
+    // The peer of levels of detail: every object at level 0, in the same run.
+    const flat = await firstComplete(`${server.url}/?max_pixel_error=0`, true);
+    if (process.env.LEVELS_ONLY) {
+      rows.push({ dir, open, slow, flat });
+      console.error(`${dir}: done`);
+      continue;
+    }
     const [street, , , outside] = views(bounds, 1);
     const cut = await flight(`${server.url}/`, street, outside);
     const full = await flight(`${server.url}/?full`, street, outside);
-    rows.push({ dir, open, slow, cut, full });
+    rows.push({ dir, open, slow, flat, cut, full });
     console.error(`${dir}: done`);
   } finally {
     await server.stop();
@@ -102,6 +111,13 @@ await browser.close();
 
 const mb = (b) => `${(b / 1048576).toFixed(1)} MB`;
 const s = (ms) => `${(ms / 1000).toFixed(1)} s`;
+console.log('| world | first complete view at 10 Mbit/s with levels of detail | without (`?max_pixel_error=0`) | ratio of times | ratio of bytes |');
+console.log('|---|---|---|---|---|');
+for (const r of rows) {
+  console.log(`| ${r.dir} | ${s(r.slow.ms)} (${mb(r.slow.bytes)}) | ${s(r.flat.ms)} (${mb(r.flat.bytes)}) | ${(r.slow.ms / r.flat.ms).toFixed(2)}x | ${(r.slow.bytes / r.flat.bytes).toFixed(2)}x |`);
+}
+console.log();
+if (process.env.LEVELS_ONLY) process.exit(0);
 console.log('| world | first complete view | at 10 Mbit/s | flight frame time cut / full (ratio) | incomplete frames in flight | peak JS heap cut / full | asset cache peak / budget |');
 console.log('|---|---|---|---|---|---|---|');
 for (const r of rows) {
