@@ -248,3 +248,26 @@ fn alpha_masked_textures_keep_their_coverage_down_the_chain() {
     }
     assert!(halvings >= 2, "only {halvings} levels halve the texture");
 }
+
+#[test]
+fn a_chain_that_fails_says_why_and_keeps_what_it_made() {
+    // A texture whose header reads but whose pixels do not: the chain cannot halve it.
+    let mut mesh = distinct_building(1, 2).unwrap();
+    let bytes = export_glb(&mesh, &ExportOptions::plain()).unwrap().len() as u64;
+    for t in &mut mesh.textures {
+        let keep = t.bytes.len().min(64);
+        t.bytes.truncate(keep);
+    }
+    let chain = build_chain(&mesh, bytes, &LevelOptions::default());
+    let why = chain.failure.expect("the chain says it failed");
+    assert!(why.contains("texture"), "{why}");
+    assert!(!why.contains('\n'));
+    // Whatever it made before the failure is a valid, smaller level.
+    for level in &chain.levels {
+        let back = import_bytes(&level.glb, Format::Glb, None, &ImportOptions::trusted())
+            .unwrap()
+            .mesh;
+        back.validate().unwrap();
+        assert!(level.info.bytes < bytes);
+    }
+}
