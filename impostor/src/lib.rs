@@ -7,17 +7,20 @@
 //! a GPU picks its mip level), vertex colours, and one fixed sun with ambient light.
 //! [`compare`] holds PSNR, SSIM (Wang et al. 2004) and the hole measure.
 //!
-//! The orthoview impostors of Chaudhuri et al. 2009 are to be rendered by this caster; they
-//! are not built yet.
+//! [`orthoview`] renders the orthographic depth images of Chaudhuri et al. 2009 with it and
+//! composites a parent's from its children's; their place in the rebuild, the cut and the
+//! viewer is not built yet.
 
 pub mod camera;
 pub mod compare;
 pub mod frame;
+pub mod orthoview;
 pub mod scene;
 mod shade;
 
 pub use camera::Camera;
 pub use compare::{compare, Comparison};
 pub use frame::Frame;
+pub use orthoview::{canonical_directions, resolution, Orthoview};
 pub use scene::{PreparedMesh, Scene, SceneBuilder, Surface};
 pub use shade::to_srgb;

@@ -1,0 +1,216 @@
+//! Orthoviews (Chaudhuri et al. 2009): a cube seen from every canonical direction, compositing
+//! against rendering, bounds, encoding, and degenerate nodes.
+
+#![allow(clippy::unwrap_used)]
+
+use std::sync::Arc;
+
+use glam::{Affine3A, Vec3};
+use horizon_impostor::orthoview::{from_octahedral, octahedral, DEPTH_THRESHOLD};
+use horizon_impostor::{canonical_directions, resolution, Orthoview, PreparedMesh, SceneBuilder};
+use horizon_mesh::{Aabb, Instance, InstancedMesh, Submesh};
+
+/// An axis-aligned box from `min` to `max`, outward winding.
+fn cuboid(min: Vec3, max: Vec3) -> InstancedMesh {
+    let positions: Vec<Vec3> = (0..8)
+        .map(|i| {
+            Vec3::new(
+                if i & 1 == 0 { min.x } else { max.x },
+                if i & 2 == 0 { min.y } else { max.y },
+                if i & 4 == 0 { min.z } else { max.z },
+            )
+        })
+        .collect();
+    let indices = vec![
+        0, 2, 1, 1, 2, 3, 4, 5, 6, 5, 7, 6, 0, 1, 4, 1, 5, 4, 2, 6, 3, 3, 6, 7, 0, 4, 2, 2, 4, 6,
+        1, 3, 5, 3, 7, 5,
+    ];
+    InstancedMesh {
+        submeshes: vec![Submesh {
+            positions,
+            indices,
+            ..Submesh::default()
+        }],
+        instances: vec![Instance {
+            submesh: 0,
+            transform: Affine3A::IDENTITY,
+        }],
+        ..InstancedMesh::default()
+    }
+}
+
+fn scene(meshes: &[InstancedMesh]) -> horizon_impostor::Scene {
+    let mut b = SceneBuilder::default();
+    for m in meshes {
+        b.add(&Arc::new(PreparedMesh::new(m)), &Affine3A::IDENTITY);
+    }
+    b.build()
+}
+
+fn aabb(min: Vec3, max: Vec3) -> Aabb {
+    Aabb { min, max }
+}
+
+/// Distance from `p` to the surface of the box.
+fn to_surface(p: Vec3, min: Vec3, max: Vec3) -> f32 {
+    let inside = p.cmpge(min).all() && p.cmple(max).all();
+    if inside {
+        (p - min).min(max - p).min_element()
+    } else {
+        (p - p.clamp(min, max)).length()
+    }
+}
+
+#[test]
+fn a_cube_from_every_canonical_direction_has_known_depth_and_normals() {
+    let (min, max) = (Vec3::ZERO, Vec3::ONE);
+    let s = scene(&[cuboid(min, max)]);
+    let dirs = canonical_directions();
+    assert_eq!(dirs.len(), 26);
+    for d in dirs {
+        let view = Orthoview::render(&s, &aabb(min, max), d, 32);
+        view.validate().unwrap();
+        let dir = Vec3::new(f32::from(d[0]), f32::from(d[1]), f32::from(d[2])).normalize();
+        let pixel = view.pixel_size();
+        let axis = d.iter().filter(|&&c| c != 0).count() == 1;
+        assert!(view.covered() > 0, "{d:?} sees nothing");
+        for y in 0..view.height {
+            for x in 0..view.width {
+                let Some(p) = view.point(x, y) else {
+                    // Along an axis the cube's face fills the whole image.
+                    assert!(!axis, "{d:?}: pixel ({x}, {y}) is empty");
+                    continue;
+                };
+                assert!(
+                    to_surface(p, min, max) <= pixel,
+                    "{d:?}: {p} is off the cube"
+                );
+                let n = view.normal_at(x, y);
+                assert!(n.dot(dir) < 0.0, "{d:?}: a normal {n} faces away");
+                if axis {
+                    // The face towards the viewer, at depth 0.
+                    assert!((n + dir).length() < 0.02, "{d:?}: normal {n}");
+                    let face = if dir.max_element() > 0.0 { min } else { max };
+                    assert!((p.dot(dir) - face.dot(dir)).abs() <= 1e-3, "{d:?}: depth");
+                }
+            }
+        }
+        // Along a corner diagonal such as (1, 1, 1) three faces show, a hexagon inside its
+        // bounding rectangle; along an axis or an edge diagonal the cube fills the rectangle.
+        let share = view.covered() as f32 / (view.width * view.height) as f32;
+        if d.iter().all(|&c| c != 0) {
+            assert!(share > 0.4 && share < 1.0, "{d:?}: {share}");
+        } else {
+            assert_eq!(share, 1.0, "{d:?}");
+        }
+    }
+}
+
+#[test]
+fn compositing_two_children_equals_rendering_their_union() {
+    let a = (Vec3::ZERO, Vec3::ONE);
+    let b = (Vec3::new(1.0, 0.0, 0.0), Vec3::new(2.0, 0.7, 1.0));
+    let (sa, sb) = (scene(&[cuboid(a.0, a.1)]), scene(&[cuboid(b.0, b.1)]));
+    let union = scene(&[cuboid(a.0, a.1), cuboid(b.0, b.1)]);
+    let parent = aabb(Vec3::ZERO, Vec3::new(2.0, 1.0, 1.0));
+    let q = 32;
+    for d in canonical_directions() {
+        let ca = Orthoview::render(&sa, &aabb(a.0, a.1), d, q);
+        let cb = Orthoview::render(&sb, &aabb(b.0, b.1), d, q);
+        let composited = Orthoview::composite(&[&ca, &cb], &parent, d, q);
+        composited.validate().unwrap();
+        let rendered = Orthoview::render(&union, &parent, d, q);
+        assert_eq!(
+            (composited.width, composited.height),
+            (rendered.width, rendered.height)
+        );
+        let pixel = rendered.pixel_size();
+        let (mut both, mut close, mut only) = (0, 0, 0);
+        for y in 0..rendered.height {
+            for x in 0..rendered.width {
+                match (composited.point(x, y), rendered.point(x, y)) {
+                    (Some(p), Some(r)) => {
+                        both += 1;
+                        let dir = Vec3::new(f32::from(d[0]), f32::from(d[1]), f32::from(d[2]))
+                            .normalize();
+                        if (p - r).dot(dir).abs() <= DEPTH_THRESHOLD * pixel {
+                            close += 1;
+                        }
+                    }
+                    (None, None) => {}
+                    _ => only += 1,
+                }
+            }
+        }
+        // Silhouettes may differ by a pixel's edge; depths agree within the threshold.
+        assert!(both > 0, "{d:?}");
+        assert!(
+            close as f32 >= 0.95 * both as f32,
+            "{d:?}: {close} of {both} close"
+        );
+        let edge = 2 * (rendered.width + rendered.height) as usize * 2;
+        assert!(
+            only <= edge,
+            "{d:?}: {only} pixels covered by one and not the other"
+        );
+    }
+}
+
+#[test]
+fn images_round_trip_losslessly_and_normals_survive_two_bytes() {
+    let (min, max) = (Vec3::new(-1.0, 0.0, -2.0), Vec3::new(3.0, 2.0, 1.0));
+    let s = scene(&[cuboid(min, max)]);
+    let view = Orthoview::render(&s, &aabb(min, max), [1, -1, 1], 40);
+    let images = view.encode().unwrap();
+    let back = Orthoview::decode(&view.bounds, view.direction, &images).unwrap();
+    assert_eq!(back, view);
+    for n in [
+        Vec3::X,
+        -Vec3::Y,
+        Vec3::new(1.0, -2.0, -3.0).normalize(),
+        -Vec3::Z,
+    ] {
+        let m = from_octahedral(octahedral(n));
+        assert!(n.dot(m) > 0.999, "{n} -> {m}");
+    }
+    // Damaged images are an error, not a panic.
+    let mut bad = images.clone();
+    bad[1].truncate(20);
+    assert!(Orthoview::decode(&view.bounds, view.direction, &bad).is_err());
+}
+
+#[test]
+fn empty_and_flat_nodes_give_valid_orthoviews() {
+    let empty = scene(&[]);
+    let flat_quad = InstancedMesh {
+        submeshes: vec![Submesh {
+            positions: vec![Vec3::ZERO, Vec3::X, Vec3::new(1.0, 0.0, 1.0), Vec3::Z],
+            indices: vec![0, 2, 1, 0, 3, 2],
+            ..Submesh::default()
+        }],
+        instances: vec![Instance {
+            submesh: 0,
+            transform: Affine3A::IDENTITY,
+        }],
+        ..InstancedMesh::default()
+    };
+    let flat = scene(&[flat_quad]);
+    let flat_box = aabb(Vec3::ZERO, Vec3::new(1.0, 0.0, 1.0));
+    for d in canonical_directions() {
+        let e = Orthoview::render(&empty, &aabb(Vec3::ZERO, Vec3::ONE), d, 8);
+        e.validate().unwrap();
+        assert_eq!(e.covered(), 0);
+        let none = Orthoview::render(&empty, &Aabb::EMPTY, d, 8);
+        none.validate().unwrap();
+        let f = Orthoview::render(&flat, &flat_box, d, 8);
+        f.validate().unwrap();
+        let c = Orthoview::composite(&[&e, &f], &flat_box, d, 8);
+        c.validate().unwrap();
+        let nothing = Orthoview::composite(&[], &flat_box, d, 8);
+        nothing.validate().unwrap();
+        assert_eq!(nothing.covered(), 0);
+    }
+    // The resolution is at least one pixel whatever it is given.
+    assert_eq!(resolution(0.0, 0.0, 0.0, 0.0), 1);
+    assert_eq!(resolution(10.0, 1000.0, 5.5e-4, 0.96), 11);
+}
