@@ -223,9 +223,9 @@ fn assess(mesh: &InstancedMesh, input: &ProxyInput<'_>) -> HashMap<u64, Shape> {
             .map_or(&[][..], Vec::as_slice);
         let entry = areas.entry(model).or_default();
         for m in inner {
-            add_areas(&mut entry.0, part, m);
+            part.add_placed_areas(m, &mut entry.0);
             if let Some(k) = k {
-                add_areas(&mut entry.1, &mesh.submeshes[k], m);
+                mesh.submeshes[k].add_placed_areas(m, &mut entry.1);
             }
         }
     }
@@ -260,27 +260,6 @@ fn assess(mesh: &InstancedMesh, input: &ProxyInput<'_>) -> HashMap<u64, Shape> {
             Some((model, Shape { lost, boxable }))
         })
         .collect()
-}
-
-/// Adds to `out` the area of `sub` placed by `m`: the total, then the area facing +x, -x, +y,
-/// -y, +z and -z (each triangle's area times the cosine to the direction, where positive).
-fn add_areas(out: &mut [f64; 7], sub: &Submesh, m: &Affine3A) {
-    let flip = if m.matrix3.determinant() < 0.0 {
-        -1.0
-    } else {
-        1.0
-    };
-    for t in sub.indices.chunks_exact(3) {
-        let [a, b, c] = [0, 1, 2].map(|i| m.transform_point3(sub.positions[t[i] as usize]));
-        let v = (b - a).cross(c - a) * (0.5 * flip);
-        if !v.is_finite() {
-            continue;
-        }
-        out[0] += f64::from(v.length());
-        for (d, value) in [v.x, -v.x, v.y, -v.y, v.z, -v.z].into_iter().enumerate() {
-            out[d + 1] += f64::from(value.max(0.0));
-        }
-    }
 }
 
 /// The model's box in model space, each face textured with what the model shows on that side,

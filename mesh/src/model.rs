@@ -450,6 +450,29 @@ impl Submesh {
         (self.indices.len() / 3) as u64
     }
 
+    /// Adds to `out` the area of this submesh placed by `m`: the total, then the area facing
+    /// +x, -x, +y, -y, +z and -z (each triangle's area times the cosine to the direction,
+    /// where positive; a mirroring placement keeps the front faces in front). Triangles whose
+    /// placed area is not finite are left out.
+    pub fn add_placed_areas(&self, m: &Affine3A, out: &mut [f64; 7]) {
+        let flip = if m.matrix3.determinant() < 0.0 {
+            -1.0
+        } else {
+            1.0
+        };
+        for t in self.indices.chunks_exact(3) {
+            let [a, b, c] = [0, 1, 2].map(|i| m.transform_point3(self.positions[t[i] as usize]));
+            let v = (b - a).cross(c - a) * (0.5 * flip);
+            if !v.is_finite() {
+                continue;
+            }
+            out[0] += f64::from(v.length());
+            for (d, value) in [v.x, -v.x, v.y, -v.y, v.z, -v.z].into_iter().enumerate() {
+                out[d + 1] += f64::from(value.max(0.0));
+            }
+        }
+    }
+
     /// Model-space bounds of the vertices the triangles use.
     pub fn bounds(&self) -> Aabb {
         let mut out = Aabb::EMPTY;
