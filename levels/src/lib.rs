@@ -200,20 +200,21 @@ pub fn build_chain(model: &InstancedMesh, bytes: u64, options: &LevelOptions) ->
         }
         // Stage 2: textures.
         let mut textures = from.textures.clone();
-        if textures_done {
-            textures.clear();
-        }
         let mut next_pixels = pixels.clone();
-        let halved = match halve_textures(
-            &mut textures,
-            &mut next_pixels,
-            &mut masks,
-            options.min_texture_side,
-        ) {
-            Ok(halved) => halved && !textures_done,
-            Err(e) => {
-                chain.failure = Some(format!("a texture could not be resampled: {e}"));
-                break;
+        let halved = if textures_done {
+            false
+        } else {
+            match halve_textures(
+                &mut textures,
+                &mut next_pixels,
+                &mut masks,
+                options.min_texture_side,
+            ) {
+                Ok(halved) => halved,
+                Err(e) => {
+                    chain.failure = Some(format!("a texture could not be resampled: {e}"));
+                    break;
+                }
             }
         };
         let mut geometry_step = false;
@@ -237,12 +238,11 @@ pub fn build_chain(model: &InstancedMesh, bytes: u64, options: &LevelOptions) ->
         };
         // What quantization may add (see `encode`), once: the first level carries it.
         let error = error.max(quantization);
-        if !textures_done {
+        if halved {
             mesh.textures = textures;
         }
         // Stage 4: encode.
-        let encoded = encode(&mesh, diagonal);
-        let glb = match encoded {
+        let glb = match encode(&mesh, diagonal) {
             Ok(glb) => glb,
             Err(e) => {
                 chain.failure = Some(format!("the level could not be written: {e}"));
@@ -294,29 +294,22 @@ fn encode(mesh: &InstancedMesh, diagonal: f32) -> Result<Vec<u8>, horizon_mesh::
     Ok(if c.len() < a.len() { c } else { a })
 }
 
-/// The area a mesh shows towards +x, -x, +y, -y, +z and -z (each triangle's area times the
-/// cosine to the direction, where positive, every instance counted).
+/// The area of `mesh`, every instance counted, per submesh: the total, then the area facing
+/// +x, -x, +y, -y, +z and -z ([`horizon_mesh::Submesh::add_placed_areas`]).
+fn placed_areas(mesh: &InstancedMesh) -> Vec<[f64; 7]> {
+    let mut out = vec![[0.0f64; 7]; mesh.submeshes.len()];
+    for inst in &mesh.instances {
+        mesh.submeshes[inst.submesh].add_placed_areas(&inst.transform, &mut out[inst.submesh]);
+    }
+    out
+}
+
+/// The area `mesh` shows towards +x, -x, +y, -y, +z and -z.
 fn facing_areas(mesh: &InstancedMesh) -> [f64; 6] {
     let mut out = [0.0f64; 6];
-    for inst in &mesh.instances {
-        let sub = &mesh.submeshes[inst.submesh];
-        let flip = if inst.transform.matrix3.determinant() < 0.0 {
-            -1.0
-        } else {
-            1.0
-        };
-        for t in sub.indices.chunks_exact(3) {
-            let [a, b, c] = [0, 1, 2].map(|i| {
-                inst.transform
-                    .transform_point3(sub.positions[t[i] as usize])
-            });
-            let v = (b - a).cross(c - a) * (0.5 * flip);
-            if !v.is_finite() {
-                continue;
-            }
-            for (d, value) in [v.x, -v.x, v.y, -v.y, v.z, -v.z].into_iter().enumerate() {
-                out[d] += f64::from(value.max(0.0));
-            }
+    for areas in placed_areas(mesh) {
+        for (o, a) in out.iter_mut().zip(&areas[1..]) {
+            *o += a;
         }
     }
     out
@@ -336,20 +329,7 @@ fn keeps_sides(full: &[f64; 6], sides: &[f64; 6]) -> bool {
 /// The share of `mesh`'s surface area in the submeshes that `kept` says lost all their
 /// triangles.
 fn dropped_area(mesh: &InstancedMesh, kept: &[Option<usize>]) -> f64 {
-    let mut areas = vec![0.0f64; mesh.submeshes.len()];
-    for inst in &mesh.instances {
-        let sub = &mesh.submeshes[inst.submesh];
-        for t in sub.indices.chunks_exact(3) {
-            let [a, b, c] = [0, 1, 2].map(|i| {
-                inst.transform
-                    .transform_point3(sub.positions[t[i] as usize])
-            });
-            let area = f64::from((b - a).cross(c - a).length()) * 0.5;
-            if area.is_finite() {
-                areas[inst.submesh] += area;
-            }
-        }
-    }
+    let areas: Vec<f64> = placed_areas(mesh).iter().map(|a| a[0]).collect();
     let total: f64 = areas.iter().sum();
     let dropped: f64 = areas
         .iter()
@@ -497,7 +477,7 @@ fn half_box(image: &image::RgbaImage) -> image::RgbaImage {
         let mut sum = [0u32; 4];
         for &sy in &ys {
             for &sx in &xs {
-                let p = image.get_pixel(sx.min(w - 1), sy.min(h - 1)).0;
+                let p = image.get_pixel(sx, sy).0;
                 for c in 0..4 {
                     sum[c] += u32::from(p[c]);
                 }
