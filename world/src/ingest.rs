@@ -140,24 +140,24 @@ pub fn stats(mesh: &InstancedMesh) -> serde_json::Value {
     serde_json::to_value(MeshStats::of(mesh)).unwrap_or(serde_json::Value::Null)
 }
 
-/// A stored model's levels of detail: level 0 (the stored GLB, `glb`) and the coarser chain
-/// (`horizon_levels`), read back from its GLB bytes like [`describe_stored`].
-pub fn level_stored(name: &str, glb: &[u8]) -> Result<(LevelInfo, Chain), WorldError> {
-    let mesh = import_bytes(glb, Format::Glb, None, &ImportOptions::trusted())
-        .map_err(|e| WorldError::model(name, e))?
-        .mesh;
-    let bytes = glb.len() as u64;
-    let chain = build_chain(&mesh, bytes, &LevelOptions::default());
-    Ok((level_zero(&mesh, bytes), chain))
+/// A stored model read back from its GLB bytes: what descriptors and levels are computed
+/// from, so that a world built from its blobs alone gets the same numbers.
+pub fn read_stored(name: &str, glb: &[u8]) -> Result<InstancedMesh, WorldError> {
+    Ok(
+        import_bytes(glb, Format::Glb, None, &ImportOptions::trusted())
+            .map_err(|e| WorldError::model(name, e))?
+            .mesh,
+    )
 }
 
-/// The descriptors and local bounding sphere of a stored model, read back from its GLB
-/// bytes, so that a world built from its blobs alone gets the same numbers.
+/// The descriptors and local bounding sphere of a stored model ([`read_stored`]).
 pub fn describe_stored(name: &str, glb: &[u8]) -> Result<ModelDescriptors, WorldError> {
-    let mesh = import_bytes(glb, Format::Glb, None, &ImportOptions::trusted())
-        .map_err(|e| WorldError::model(name, e))?
-        .mesh;
-    let d = describe(&mesh, &DescriptorOptions::default())
+    describe_read(name, &read_stored(name, glb)?)
+}
+
+/// The descriptors and local bounding sphere of `mesh`, a stored model read back.
+pub fn describe_read(name: &str, mesh: &InstancedMesh) -> Result<ModelDescriptors, WorldError> {
+    let d = describe(mesh, &DescriptorOptions::default())
         .map_err(|e| WorldError::model(name, e))?
         .descriptors;
     let b = mesh.bounds();
@@ -167,4 +167,16 @@ pub fn describe_stored(name: &str, glb: &[u8]) -> Result<ModelDescriptors, World
         centre: ((b.min + b.max) * 0.5).to_array(),
         radius: (b.max - b.min).length() * 0.5,
     })
+}
+
+/// A stored model's levels of detail ([`read_stored`]): level 0 (the stored GLB, `glb`) and
+/// the coarser chain (`horizon_levels`).
+pub fn level_stored(name: &str, glb: &[u8]) -> Result<(LevelInfo, Chain), WorldError> {
+    Ok(level_read(&read_stored(name, glb)?, glb.len() as u64))
+}
+
+/// The levels of detail of `mesh`, a stored model of `bytes` read back.
+pub fn level_read(mesh: &InstancedMesh, bytes: u64) -> (LevelInfo, Chain) {
+    let chain = build_chain(mesh, bytes, &LevelOptions::default());
+    (level_zero(mesh, bytes), chain)
 }

@@ -37,7 +37,10 @@ use serde::Serialize;
 use crate::aggregates::{named_blobs, recorded_entries, stored_entries, AggregateSink};
 use crate::error::WorldError;
 use crate::hash::content_hash;
-use crate::ingest::{describe_stored, import_upload, level_stored, normalise, stats, UploadLimits};
+use crate::ingest::{
+    describe_read, describe_stored, import_upload, level_read, level_stored, normalise,
+    read_stored, stats, UploadLimits,
+};
 use crate::legacy::{is_legacy, LegacyWorld};
 use crate::models::Models;
 use crate::store::{
@@ -545,17 +548,28 @@ impl World {
         let glb = normalise(name, &ingested.mesh)?;
         self.meta.check_model_quota(owner, glb.len() as u64)?;
         let asset = content_hash(&glb);
-        let (described, levels) = rayon::join(
-            || match self.meta.descriptors(&asset)? {
-                Some(_) => Ok(None),
-                None => describe_stored(name, &glb).map(Some),
-            },
-            || match self.meta.levels(&asset)? {
-                Some(_) => Ok(None),
-                None => level_stored(name, &glb).map(Some),
-            },
+        let (need_descriptors, need_levels) = (
+            self.meta.descriptors(&asset)?.is_none(),
+            self.meta.levels(&asset)?.is_none(),
         );
-        let (described, levels) = (described?, levels?);
+        // Both are computed from the stored GLB read back once, side by side.
+        let stored = if need_descriptors || need_levels {
+            Some(read_stored(name, &glb)?)
+        } else {
+            None
+        };
+        let (described, levels) = match &stored {
+            Some(mesh) => rayon::join(
+                || {
+                    need_descriptors
+                        .then(|| describe_read(name, mesh))
+                        .transpose()
+                },
+                || need_levels.then(|| level_read(mesh, glb.len() as u64)),
+            ),
+            None => (Ok(None), None),
+        };
+        let described = described?;
         if let Some(failure) = levels.as_ref().and_then(|l| l.1.failure.as_ref()) {
             tracing::warn!(model = name, "levels of detail stopped early: {failure}");
         }
@@ -640,24 +654,20 @@ impl World {
                     let glb = self.models.glb(number)?;
                     let (zero, chain) = level_stored(&row.name, &glb)?;
                     let levels = self.list_levels(&row.asset, &zero, &chain, true)?;
-                    Ok((row, levels, chain.failure))
+                    if let Some(failure) = &chain.failure {
+                        tracing::warn!(
+                            model = row.name,
+                            "levels of detail stopped early: {failure}"
+                        );
+                    }
+                    Ok(((row.asset, levels), chain.failure.map(|f| (row.name, f))))
                 })
                 .collect::<Result<Vec<_>, WorldError>>()?;
             self.blobs.commit_staged()?;
-            let rows: Vec<(String, Vec<ModelLevel>)> = levelled
-                .iter()
-                .map(|(row, levels, _)| (row.asset.clone(), levels.clone()))
-                .collect();
+            let (rows, failed): (Vec<(String, Vec<ModelLevel>)>, Vec<_>) =
+                levelled.into_iter().unzip();
             self.meta.put_levels_batch(&rows)?;
-            for (row, _, failure) in levelled {
-                if let Some(failure) = failure {
-                    tracing::warn!(
-                        model = row.name,
-                        "levels of detail stopped early: {failure}"
-                    );
-                    failures.push((row.name, failure));
-                }
-            }
+            failures.extend(failed.into_iter().flatten());
             done += batch.len();
             progress(done, missing.len());
         }
