@@ -972,7 +972,7 @@ async fn where_a_plans_decisions_hold_planning_again_gives_the_same_cut() {
             moved.eye[i] += f64::from(dir[i]) * step;
         }
         let holds = world
-            .with_served(|served| plan.decisions.hold_at(served.tree, moved.eye))
+            .with_served(|served| plan.holds_at(served.tree, moved.eye))
             .unwrap();
         let again = state.plan(&moved).unwrap();
         let same = as_set(&again) == before && again.stopped_by == plan.stopped_by;

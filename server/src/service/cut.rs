@@ -101,7 +101,8 @@ pub struct Plan {
 
 /// The decisions that made a plan, by the node: with the same tree and the same view but
 /// for the eye, planning again (with this plan held, [`plan_after`]) gives the same plan
-/// exactly when [`Decisions::hold_at`] the new eye. Refinement took the nodes of `refined` in order of their worst-case solid angle
+/// exactly when [`Plan::holds_at`] the new eye: these decisions hold there
+/// ([`Decisions::hold_at`]) and so does every object's level. Refinement took the nodes of `refined` in order of their worst-case solid angle
 /// (each at least `min_solid_angle`), then either ran out of nodes at or over it, or a
 /// budget refused `stopper`; `frontier` is every other node in the cut.
 #[derive(Clone, Debug, Default)]
@@ -116,18 +117,15 @@ pub struct Decisions {
     ordered: bool,
     /// Each pending object, and whether it subtended `min_solid_angle`.
     pending: Vec<(ObjectId, bool)>,
-    /// Each object entry's level of detail, with what choosing it again takes.
+    /// Each object entry's own level of detail (before models share levels).
     levels: Vec<(ObjectId, u8)>,
-    models: Arc<Models>,
-    pixel_angle: f32,
-    max_pixel_error: f64,
 }
 
 impl Decisions {
     /// Whether refinement at `eye`, on the tree the plan was made on, takes the same
     /// decisions: the same nodes refined (in the same order where it matters), the same node
     /// refused, every other node left, every pending object on the same side of
-    /// `min_solid_angle`, every object at the same level of detail. Ties count as changes (the planner breaks them by node id), so
+    /// `min_solid_angle`. Ties count as changes (the planner breaks them by node id), so
     /// "true" is exact: it evaluates the planner's own solid angles.
     pub fn hold_at(&self, tree: &horizon_world::Tree, eye: [f64; 3]) -> bool {
         let eye = eye_of(eye);
@@ -139,26 +137,6 @@ impl Decisions {
             .iter()
             .any(|&(o, seen)| subtends(bvh, o, eye, min) != Some(seen))
         {
-            return false;
-        }
-        // Every object keeps its level of detail (with the hysteresis a held level has).
-        let level_holds = |&(o, level): &(ObjectId, u8)| {
-            let Some(r) = bvh.object(o) else {
-                return false;
-            };
-            let Some(m) = self.models.get(r.model() as usize).and_then(Option::as_ref) else {
-                return level == 0;
-            };
-            level_at(
-                m,
-                &r,
-                eye,
-                self.pixel_angle,
-                self.max_pixel_error,
-                Some(level),
-            ) == level
-        };
-        if !self.levels.iter().all(level_holds) {
             return false;
         }
         if self.over_at_seed {
@@ -227,6 +205,11 @@ fn level_at(
     m.choose(distance, scale, pixel_angle, max_pixel_error as f32, held)
 }
 
+/// The angle of one of a view's pixels, radians.
+fn pixel_angle(view: &View) -> f32 {
+    view.pixel_solid_angle.sqrt() as f32
+}
+
 /// A view's eye in the tree's precision.
 fn eye_of(eye: [f64; 3]) -> Vec3 {
     Vec3::new(eye[0] as f32, eye[1] as f32, eye[2] as f32)
@@ -283,10 +266,9 @@ pub enum Drawn {
         model: u64,
         /// Model to world.
         transform: Affine3A,
-        /// The level of detail drawn.
-        level: u8,
-        /// The coarsest level the object itself may be drawn at ([`ModelAsset::choose`]);
-        /// `level` is finer where another object of the model needs a finer one.
+        /// The coarsest level the object itself may be drawn at ([`ModelAsset::choose`]); the
+        /// level drawn (the key's) is finer where another object of the model needs a finer
+        /// one.
         needed: u8,
     },
     /// The node's published aggregate (in the plan's manifest).
@@ -437,30 +419,30 @@ impl AssetTable {
                 Some(all) => all.get(&row.asset).cloned().unwrap_or_default(),
                 None => world.levels_of(&row.asset)?,
             };
+            // A model not levelled yet is its stored GLB alone.
             let count = |key: &str| row.stats.get(key).and_then(|v| v.as_u64()).unwrap_or(0);
-            let mut levels = vec![LevelAsset {
-                hash: row.asset.clone(),
-                bytes: row.bytes,
-                triangles: count("triangles_expanded"),
-                draw_calls: count("submeshes").max(1),
-                error: 0.0,
-                texel: 0.0,
-            }];
-            for (k, l) in stored.iter().enumerate() {
-                let asset = LevelAsset {
-                    hash: l.asset.clone(),
-                    bytes: l.info.bytes,
-                    triangles: l.info.triangles,
-                    draw_calls: l.info.submeshes.max(1),
-                    error: l.info.error as f32,
-                    texel: l.info.texel_density.map_or(0.0, |d| (1.0 / d) as f32),
-                };
-                if k == 0 {
-                    levels[0].texel = asset.texel;
-                } else {
-                    levels.push(asset);
-                }
-            }
+            let levels = if stored.is_empty() {
+                vec![LevelAsset {
+                    hash: row.asset.clone(),
+                    bytes: row.bytes,
+                    triangles: count("triangles_expanded"),
+                    draw_calls: count("submeshes").max(1),
+                    error: 0.0,
+                    texel: 0.0,
+                }]
+            } else {
+                stored
+                    .iter()
+                    .map(|l| LevelAsset {
+                        hash: l.asset.clone(),
+                        bytes: l.info.bytes,
+                        triangles: l.info.triangles,
+                        draw_calls: l.info.submeshes.max(1),
+                        error: l.info.error as f32,
+                        texel: l.info.texel_density.map_or(0.0, |d| (1.0 / d) as f32),
+                    })
+                    .collect()
+            };
             table[i] = Some(Arc::new(ModelAsset { levels }));
         }
         *self
@@ -621,7 +603,7 @@ impl<'a> Planner<'a> {
             stopper: None,
             over_at_seed: false,
             held_levels: HashMap::new(),
-            pixel_angle: view.pixel_solid_angle.sqrt() as f32,
+            pixel_angle: pixel_angle(view),
         }
     }
 
@@ -876,9 +858,6 @@ impl<'a> Planner<'a> {
                 })
                 .collect(),
             levels: Vec::new(),
-            models: self.models.clone(),
-            pixel_angle: self.pixel_angle,
-            max_pixel_error: self.view.max_pixel_error,
         };
         let tree = self.served.tree;
         let published = self.served.published;
@@ -903,7 +882,6 @@ impl<'a> Planner<'a> {
                 what: Drawn::Object {
                     model,
                     transform: r.transform(),
-                    level,
                     needed: level,
                 },
                 covers: 1,
@@ -985,11 +963,8 @@ fn share_levels(items: &mut [Planned]) {
         }
     }
     for p in items.iter_mut() {
-        if let (Drawn::Object { model, level, .. }, Key::Object { level: key, .. }) =
-            (&mut p.what, &mut p.key)
-        {
+        if let (Drawn::Object { model, .. }, Key::Object { level, .. }) = (&p.what, &mut p.key) {
             *level = finest[model];
-            *key = *level;
         }
     }
 }
@@ -1001,6 +976,14 @@ impl Planned {
             && self.pending == other.pending
             && self.center == other.center
             && self.radius == other.radius
+    }
+
+    /// An object's level of detail (0 for an aggregate).
+    fn level(&self) -> u8 {
+        match self.key {
+            Key::Object { level, .. } => level,
+            Key::Aggregate { .. } => 0,
+        }
     }
 
     fn node(&self) -> Option<NodeId> {
@@ -1036,6 +1019,28 @@ fn matrix_of(t: &Affine3A) -> [f32; 12] {
 }
 
 impl Plan {
+    /// Whether planning again at `eye` with this plan held ([`plan_after`]), on the tree it
+    /// was made on and with the rest of its view, gives this plan: its [`Decisions`] hold
+    /// there and every object keeps its own level of detail (within the hysteresis a held
+    /// level has).
+    pub fn holds_at(&self, tree: &horizon_world::Tree, eye: [f64; 3]) -> bool {
+        if !self.decisions.hold_at(tree, eye) {
+            return false;
+        }
+        let (eye, bvh) = (eye_of(eye), &tree.bvh);
+        let pixel_angle = pixel_angle(&self.view);
+        self.decisions.levels.iter().all(|&(o, level)| {
+            let Some(r) = bvh.object(o) else {
+                return false;
+            };
+            let Some(m) = self.models.get(r.model() as usize).and_then(Option::as_ref) else {
+                return level == 0;
+            };
+            let held = Some(level);
+            level_at(m, &r, eye, pixel_angle, self.view.max_pixel_error, held) == level
+        })
+    }
+
     /// The wire entries, largest solid angle first (ties by id).
     pub fn entries(&self) -> Vec<Entry> {
         let mut order: Vec<&Planned> = self.items.iter().collect();
@@ -1079,25 +1084,23 @@ impl Plan {
         let mut preview = None;
         let (kind, asset, bytes, triangles, draw_calls, matrix, role) = match &p.what {
             Drawn::Object {
-                model,
-                transform,
-                level: l,
-                ..
+                model, transform, ..
             } => {
-                level = u32::from(*l);
+                let l = p.level();
+                level = u32::from(l);
                 let asset = self.models.get(*model as usize).and_then(Option::as_ref);
                 preview = asset
                     .and_then(|m| {
                         m.levels
                             .last()
-                            .filter(|_| usize::from(*l) + 1 < m.levels.len())
+                            .filter(|_| usize::from(l) + 1 < m.levels.len())
                     })
                     .map(|c| Asset {
                         hash: c.hash.clone(),
                         bytes: c.bytes,
                         role: AssetRole::Preview,
                     });
-                let m = asset.map(|m| m.level(*l));
+                let m = asset.map(|m| m.level(l));
                 (
                     EntryKind::Object,
                     m.map_or(String::new(), |m| m.hash.clone()),

@@ -425,7 +425,7 @@ async fn write(
                     .with_served(|served| {
                         served.tree.generation == h.generation
                             && served.published == h.published
-                            && h.decisions.hold_at(served.tree, view.eye)
+                            && h.holds_at(served.tree, view.eye)
                     })
                     .unwrap_or(false);
             if holds {
