@@ -8,8 +8,8 @@
 //! [`compare`] holds PSNR, SSIM (Wang et al. 2004) and the hole measure.
 //!
 //! [`orthoview`] renders the orthographic depth images of Chaudhuri et al. 2009 with it and
-//! composites a parent's from its children's; their place in the rebuild, the cut and the
-//! viewer is not built yet.
+//! composites a parent's from its children's; `horizon-aggregate` builds every node's in the
+//! rebuild and the server's cut sends them as the far field.
 
 pub mod camera;
 pub mod compare;
@@ -21,6 +21,9 @@ mod shade;
 pub use camera::Camera;
 pub use compare::{compare, Comparison};
 pub use frame::Frame;
-pub use orthoview::{canonical_directions, resolution, Orthoview};
+pub use orthoview::{
+    canonical_directions, facing, resolution, world_resolution, Orthoview, VIEWS_SERVED,
+    WORLD_DIRECTIONS, WORLD_THETA,
+};
 pub use scene::{PreparedMesh, Scene, SceneBuilder, Surface};
 pub use shade::to_srgb;

@@ -10,17 +10,23 @@
 //!   depth is the block's minimum and whose colour and normal are the mean of the block's
 //!   pixels within [`DEPTH_THRESHOLD`] pixels of depth of it.
 //! - [`resolution`] is the paper's q with the solid-angle contract in place of its screen:
-//!   `q = s cos(theta) / (r * pixel_angle)`, where the paper's `2 r tan(alpha / 2) / p` (the
+//!   `q = s / (cos(theta) * r * pixel_angle)`, where the paper's `2 r tan(alpha / 2) / p` (the
 //!   width of a screen pixel at distance r) is `r * pixel_angle` and `pixel_angle` is the square
 //!   root of the view's `pixel_solid_angle`: adjacent orthoview pixels then land on adjacent
-//!   screen pixels for a surface seen `theta` from its normal at distance `r`.
-//!
+//!   screen pixels for a surface seen `theta` from the nearest direction at distance `r`.
+//! - [`world_resolution`] fixes `s / r`: a node is handed to its impostor once its bounding
+//!   sphere subtends `min_solid_angle` (`pi (s/2)^2 / r^2 = min_solid_angle`), so every node
+//!   gets the same q, as every cell of the paper's octree does:
+//!   `q = 2 sqrt(min_solid_angle / (pi * pixel_solid_angle)) / cos(theta)`, 95 at the
+//!   defaults (0.001 sr, 3.0e-7 sr, [`WORLD_DIRECTIONS`]' theta of 46.4 degrees).
+//! - [`WORLD_DIRECTIONS`] are the nine a world's impostors are made from (why: see there).
+
 //! An orthoview's image plane is perpendicular to its direction and covers the projection of
 //! its box; pixels are square. Depth 0 is an empty pixel; 1..=65535 spans the box's extent
 //! along the direction, nearest first.
 //!
-//! Not built yet: the choice of directions per world, the impostors' place in the rebuild, the
-//! cut and the viewer (issue 29).
+//! Where impostors are built and served: `horizon-aggregate`'s `impostors.rs` (the rebuild)
+//! and the server's cut.
 
 use glam::{Vec2, Vec3};
 use horizon_mesh::Aabb;
@@ -45,20 +51,88 @@ pub fn canonical_directions() -> Vec<[i8; 3]> {
     out
 }
 
+/// The canonical directions a world's orthoviews look along: straight down, the four
+/// downward diagonals `(+-1, -1, +-1)` and the four horizontal diagonals `(+-1, 0, +-1)`.
+///
+/// Why these nine of the 26 (the paper's figure 5: five views disocclude badly, nine do well,
+/// and a client needs about three of them per cell):
+/// - Clients stand on or above the ground, so no view looks up: nine suffice where the sphere
+///   would need 26.
+/// - A regular street grid, the paper's own warning case, runs along x and z. Views along those
+///   axes (`(1, 0, 0)`, `(1, -1, 0)`, ...) look straight down its streets: every facade along
+///   a street is seen edge-on and every cross street hides behind the block in front. The
+///   diagonals see two faces of every block at 45 degrees, and straight down sees the streets
+///   themselves.
+/// - Every view from above or level lies within [`WORLD_THETA`] (46.4 degrees) of one of them.
+pub const WORLD_DIRECTIONS: [[i8; 3]; 9] = [
+    [0, -1, 0],
+    [1, -1, 1],
+    [1, -1, -1],
+    [-1, -1, 1],
+    [-1, -1, -1],
+    [1, 0, 1],
+    [1, 0, -1],
+    [-1, 0, 1],
+    [-1, 0, -1],
+];
+
+/// The largest angle between a view from above or level and the nearest of
+/// [`WORLD_DIRECTIONS`], 46.4 degrees: a view along an axis 12.6 degrees below the horizon,
+/// between two level and two downward diagonals (a test checks it on a grid of views).
+pub const WORLD_THETA: f32 = 0.8094;
+
+/// How many of a node's orthoviews a cut sends: those nearest the view direction. The paper's
+/// figure 5: two leave disocclusions, a third largely removes them.
+pub const VIEWS_SERVED: usize = 3;
+
 /// Pixels of depth within which composited pixels are averaged together.
 pub const DEPTH_THRESHOLD: f32 = 1.5;
 
 /// The paper's orthoview resolution q for a box of linear extent `extent`, shown as an
 /// impostor from `distance` and beyond, to a client whose pixel subtends `pixel_angle`
-/// radians, for surfaces seen at most `theta` radians from their normal. At least 1.
+/// radians, for surfaces seen at most `theta` radians from the nearest direction. At least 1.
 pub fn resolution(extent: f32, distance: f32, pixel_angle: f32, theta: f32) -> u32 {
-    let pixel = (distance * pixel_angle).max(f32::MIN_POSITIVE);
-    let q = (extent * theta.cos() / pixel).ceil();
+    let pixel = (distance * pixel_angle * theta.cos()).max(f32::MIN_POSITIVE);
+    let q = (extent / pixel).ceil();
     if q.is_finite() {
         q.clamp(1.0, 8192.0) as u32
     } else {
         1
     }
+}
+
+/// The one q of a world's orthoviews (see the module docs): [`resolution`] for a node at the
+/// distance where its bounding sphere subtends `min_solid_angle`, for clients whose pixel
+/// subtends `pixel_solid_angle`, over [`WORLD_DIRECTIONS`].
+pub fn world_resolution(min_solid_angle: f32, pixel_solid_angle: f32) -> u32 {
+    // The extent 2 R of a sphere of radius R at the distance R sqrt(pi / Omega).
+    let distance = (std::f32::consts::PI / min_solid_angle).sqrt() * 0.5;
+    resolution(1.0, distance, pixel_solid_angle.sqrt(), WORLD_THETA)
+}
+
+/// The [`VIEWS_SERVED`] directions of `directions` nearest to looking along `view` (from the
+/// eye towards the node), nearest first; only those less than 90 degrees from it.
+pub fn facing(directions: &[[i8; 3]], view: Vec3) -> Vec<usize> {
+    let view = view.normalize_or_zero();
+    let mut order: Vec<(f32, usize)> = directions
+        .iter()
+        .enumerate()
+        .map(|(i, d)| (unit(*d).dot(view), i))
+        .filter(|(c, _)| *c > 0.0)
+        .collect();
+    order.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
+    order.truncate(VIEWS_SERVED);
+    order.into_iter().map(|(_, i)| i).collect()
+}
+
+/// A canonical direction as a unit vector.
+pub fn unit(direction: [i8; 3]) -> Vec3 {
+    Vec3::new(
+        f32::from(direction[0]),
+        f32::from(direction[1]),
+        f32::from(direction[2]),
+    )
+    .normalize_or_zero()
 }
 
 /// One orthographic depth image (see the module docs).
@@ -102,12 +176,7 @@ struct Frame {
 impl Frame {
     /// The frame over `bounds` looking along `direction`, `q` pixels along its longer side.
     fn new(bounds: &Aabb, direction: [i8; 3], q: u32) -> Frame {
-        let d = Vec3::new(
-            f32::from(direction[0]),
-            f32::from(direction[1]),
-            f32::from(direction[2]),
-        )
-        .normalize();
+        let d = unit(direction);
         // An up-ish second axis: world Y unless the direction is vertical.
         let helper = if d.y.abs() > 0.9 { Vec3::Z } else { Vec3::Y };
         let u = helper.cross(d).normalize();

@@ -212,5 +212,66 @@ fn empty_and_flat_nodes_give_valid_orthoviews() {
     }
     // The resolution is at least one pixel whatever it is given.
     assert_eq!(resolution(0.0, 0.0, 0.0, 0.0), 1);
-    assert_eq!(resolution(10.0, 1000.0, 5.5e-4, 0.96), 11);
+}
+
+#[test]
+fn the_resolution_puts_one_orthoview_pixel_on_at_most_one_screen_pixel() {
+    for &(extent, distance, pixel_angle, theta) in &[
+        (10.0f32, 1000.0f32, 5.5e-4f32, 0.96f32),
+        (300.0, 9000.0, 5.5e-4, 0.785),
+        (1.0, 28.0, 5.5e-4, 0.1),
+    ] {
+        let q = resolution(extent, distance, pixel_angle, theta) as f32;
+        // A surface seen theta from the direction: its orthoview pixel, foreshortened.
+        let on_screen = |q: f32| extent / q / theta.cos() / (distance * pixel_angle);
+        assert!(on_screen(q) <= 1.0 + 1e-4, "{q}");
+        assert!(on_screen(q - 1.0) > 1.0, "{q} is more than needed");
+    }
+    // The world's q: a node whose sphere subtends min_solid_angle, one pixel per pixel.
+    let (omega, pixel) = (1e-3f32, 3.0e-7f32);
+    let q = horizon_impostor::world_resolution(omega, pixel);
+    let distance = (std::f32::consts::PI / omega).sqrt() * 0.5;
+    assert_eq!(
+        q,
+        resolution(1.0, distance, pixel.sqrt(), horizon_impostor::WORLD_THETA)
+    );
+    assert!(horizon_impostor::world_resolution(omega * 4.0, pixel) > q);
+}
+
+#[test]
+fn every_view_from_above_is_within_theta_of_a_world_direction_and_faces_two_or_three() {
+    use horizon_impostor::{facing, WORLD_DIRECTIONS, WORLD_THETA};
+    let dirs: Vec<Vec3> = WORLD_DIRECTIONS
+        .iter()
+        .map(|d| Vec3::new(d[0] as f32, d[1] as f32, d[2] as f32).normalize())
+        .collect();
+    // No direction looks up, and none along a grid street (x or z alone, level or down).
+    assert!(WORLD_DIRECTIONS.iter().all(|d| d[1] <= 0));
+    assert!(WORLD_DIRECTIONS
+        .iter()
+        .all(|d| d[0] != 0 && d[2] != 0 || (d[0], d[2]) == (0, 0)));
+    let mut worst = 0.0f32;
+    for i in 0..=400 {
+        for j in 0..80 {
+            let elevation = -(i as f32) / 400.0 * std::f32::consts::FRAC_PI_2;
+            let azimuth = j as f32 / 80.0 * std::f32::consts::TAU;
+            let v = Vec3::new(
+                elevation.cos() * azimuth.cos(),
+                elevation.sin(),
+                elevation.cos() * azimuth.sin(),
+            );
+            let nearest = dirs.iter().map(|d| d.dot(v).clamp(-1.0, 1.0).acos());
+            worst = worst.max(nearest.fold(f32::INFINITY, f32::min));
+            let chosen = facing(&WORLD_DIRECTIONS, v);
+            // At least two face every such view (a level diagonal view has exactly two).
+            assert!((2..=3).contains(&chosen.len()), "{v}: {chosen:?}");
+            // Nearest first.
+            let angle = |k: usize| dirs[chosen[k]].dot(v);
+            assert!((1..chosen.len()).all(|k| angle(k - 1) >= angle(k) - 1e-6));
+        }
+    }
+    assert!(worst <= WORLD_THETA + 1e-3, "{worst}");
+    assert!(worst >= WORLD_THETA - 2e-3, "{worst}");
+    // Looking up, nothing faces: the cut draws geometry.
+    assert!(facing(&WORLD_DIRECTIONS, Vec3::Y).is_empty());
 }
