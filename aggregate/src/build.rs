@@ -21,6 +21,7 @@ use horizon_atlas::TextureCache;
 use crate::budget::Display;
 use crate::error::AggregateError;
 use crate::generate::{generate_with, Handoff, NodeInput, PartKey, Placement, StageSeconds};
+use crate::impostors::{build_impostors, ImpostorPolicy, ImpostorReport};
 use crate::keys::{node_keys, KeyHasher};
 use crate::options::{AggregateOptions, AtlasPolicy, Method};
 use crate::source::ModelSource;
@@ -52,6 +53,8 @@ pub struct BuildOptions {
     pub aggregate: AggregateOptions,
     /// The world's texture count and encoded bytes (for [`AtlasPolicy::Auto`]).
     pub world_textures: (usize, u64),
+    /// Which nodes get orthoview impostors after the aggregates (`impostors.rs`).
+    pub impostors: ImpostorPolicy,
 }
 
 /// Progress of a rebuild, for a progress bar.
@@ -90,6 +93,9 @@ pub struct BuildReport {
     /// run in parallel).
     #[serde(default)]
     pub stages: StageSeconds,
+    /// The impostors' stage, if the build made them (its time is in `seconds` too).
+    #[serde(default)]
+    pub impostors: Option<ImpostorReport>,
 }
 
 /// One tree level of a rebuild.
@@ -360,13 +366,32 @@ fn build(
     report.level_times.reverse();
     report.failed = failed.into_inner().unwrap_or_default();
     report.failed.sort();
-    // Stage 4: the manifest, last; then what it no longer names goes.
+    // Stage 4: the impostors, from the aggregates just built or reused.
+    let impostors = if options.impostors != ImpostorPolicy::Off && only.is_none() {
+        let previous = store.manifest()?;
+        let (impostors, impostor_report) = build_impostors(
+            bvh,
+            models,
+            store,
+            &entries,
+            previous.as_ref(),
+            options.impostors,
+            options.aggregate.min_solid_angle as f32,
+            stop,
+        )?;
+        report.impostors = Some(impostor_report);
+        impostors
+    } else {
+        BTreeMap::new()
+    };
+    // Stage 5: the manifest, last; then what it no longer names goes.
     let manifest = AggregateManifest {
         format: crate::FORMAT,
         options: options.aggregate,
         atlas,
         root_key,
         nodes: entries,
+        impostors,
     };
     store.write_manifest(&manifest)?;
     report.seconds = start.elapsed().as_secs_f64();

@@ -10,6 +10,9 @@
 //!   ([`KeyHasher`]): the dirty tracking.
 //! - `generate.rs`: [`generate`], one node's pipeline: gather, cull, dedup, merge, IAS, box
 //!   proxies, atlas, encode; [`Handoff`], what a node hands its parent.
+//! - `impostors.rs`: [`build_impostors`], the orthoview impostors of the nodes where they
+//!   cost less to serve than the aggregate: ray-cast at the hierarchy's leaves, composited
+//!   above, reused by key, in the manifest beside the aggregates.
 //! - `proxy.rs`: box proxies for the objects whose simplified parts lost their shape, and
 //!   over the budget for the smallest others: nothing that shows is dropped.
 //! - `dedup.rs`: Table 1 dedup with PCA alignment (section 5.1).
@@ -33,6 +36,7 @@ mod build;
 pub mod dedup;
 mod error;
 mod generate;
+pub mod impostors;
 mod keys;
 pub mod options;
 pub mod pca;
@@ -51,6 +55,7 @@ pub use generate::{
     generate, generate_with, ExpandedPart, Handoff, NodeInput, NodeOutput, NodeStats, Placement,
     StageSeconds, POSITION_PIXELS,
 };
+pub use impostors::{build_impostors, ImpostorEntry, ImpostorPolicy, ImpostorReport, ImpostorView};
 pub use keys::{node_keys, KeyHasher};
 pub use options::{AggregateOptions, AtlasPolicy, Method};
 pub use source::{InMemoryModels, ModelSource, SourceModel};

@@ -21,6 +21,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::AggregateError;
 use crate::generate::NodeStats;
+use crate::impostors::ImpostorEntry;
 use crate::keys::KeyHasher;
 use crate::options::AggregateOptions;
 
@@ -57,6 +58,19 @@ pub struct AggregateManifest {
     pub root_key: String,
     /// Per node number, its aggregate.
     pub nodes: BTreeMap<u32, AggregateEntry>,
+    /// Per node number, its impostor (only nodes that get one: `impostors.rs`).
+    #[serde(default)]
+    pub impostors: BTreeMap<u32, ImpostorEntry>,
+}
+
+impl AggregateManifest {
+    /// Every blob it names: aggregate GLBs, parts files and orthoview images.
+    pub fn blobs(&self) -> impl Iterator<Item = &String> {
+        self.nodes
+            .values()
+            .flat_map(|e| std::iter::once(&e.glb).chain(e.parts.as_ref()))
+            .chain(self.impostors.values().flat_map(ImpostorEntry::blobs))
+    }
 }
 
 /// Where a rebuild keeps aggregates (see the module docs for the protocol).
@@ -78,11 +92,20 @@ pub trait AggregateStore: Sync {
         stats: NodeStats,
     ) -> Result<AggregateEntry, AggregateError>;
 
+    /// Takes a blob (an orthoview image) to be kept at the next [`AggregateStore::commit`];
+    /// returns its content hash.
+    fn stage_blob(&self, bytes: &[u8]) -> Result<String, AggregateError>;
+
     /// Keeps everything staged since the last commit. Nothing staged: nothing done.
     fn commit(&self) -> Result<(), AggregateError>;
 
     /// The bytes of a committed parts file.
     fn parts(&self, hash: &str) -> Result<Vec<u8>, AggregateError>;
+
+    /// The bytes of any committed blob (parts file or orthoview image).
+    fn blob(&self, hash: &str) -> Result<Vec<u8>, AggregateError> {
+        self.parts(hash)
+    }
 
     /// Replaces the manifest as one step.
     fn write_manifest(&self, manifest: &AggregateManifest) -> Result<(), AggregateError>;
@@ -176,6 +199,14 @@ impl AggregateStore for MemoryStore {
         };
         m.staged_entries.push(entry.clone());
         Ok(entry)
+    }
+
+    fn stage_blob(&self, bytes: &[u8]) -> Result<String, AggregateError> {
+        let hash = memory_hash(bytes);
+        self.lock()?
+            .staged_blobs
+            .push((hash.clone(), bytes.to_vec()));
+        Ok(hash)
     }
 
     fn commit(&self) -> Result<(), AggregateError> {

@@ -8,7 +8,8 @@ use std::path::Path;
 use anyhow::Context;
 use glam::Vec3;
 use horizon_aggregate::{
-    build_aggregates, AggregateOptions, BuildOptions, BuildReport, LevelTime, Progress,
+    build_aggregates, AggregateOptions, BuildOptions, BuildReport, ImpostorPolicy, LevelTime,
+    Progress,
 };
 use horizon_bvh::Bvh;
 use horizon_mesh::rng::Rng;
@@ -111,6 +112,7 @@ pub fn run(dir: &Path, insert: usize, seed: u64, out: Option<&Path>) -> anyhow::
     let build_options = BuildOptions {
         aggregate: options,
         world_textures: models.texture_totals()?,
+        impostors: ImpostorPolicy::WherePaying,
     };
     let sink = AggregateSink::new(world.meta(), world.blobs(), Some((*full_manifest).clone()));
     let outcome = build_aggregates(bvh, models, &sink, &build_options, &|p: Progress| {

@@ -143,6 +143,13 @@ impl AggregateStore for MeasuringStore {
         Ok(entry)
     }
 
+    /// The baseline it measures has no impostors: nothing to keep.
+    fn stage_blob(&self, _bytes: &[u8]) -> Result<String, AggregateError> {
+        Err(AggregateError::Tree(
+            "the measuring store keeps no impostors".into(),
+        ))
+    }
+
     fn commit(&self) -> Result<(), AggregateError> {
         let lines = std::mem::take(
             &mut *self

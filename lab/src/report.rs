@@ -10,7 +10,9 @@ use std::time::Instant;
 
 use anyhow::Context;
 use glam::Vec3;
-use horizon_aggregate::{build_subtrees, AggregateManifest, BuildOptions, Progress};
+use horizon_aggregate::{
+    build_subtrees, AggregateManifest, BuildOptions, ImpostorPolicy, Progress,
+};
 use horizon_bvh::{Bvh, CutItem, CutQuery};
 use horizon_server::outln;
 use horizon_server::terminal::ProgressBar;
@@ -112,6 +114,7 @@ pub fn run(
     let baseline_options = BuildOptions {
         aggregate: ours.options.unoptimized(),
         world_textures: models.texture_totals()?,
+        impostors: ImpostorPolicy::Off,
     };
     let shown: BTreeSet<u32> = cuts
         .iter()

@@ -87,13 +87,9 @@ pub fn recorded_entries(meta: &dyn MetaStore) -> Result<Vec<AggregateEntry>, Wor
         .collect())
 }
 
-/// The blobs `manifest` names: every aggregate GLB and parts file.
+/// The blobs `manifest` names: every aggregate GLB, parts file and orthoview image.
 pub fn named_blobs(manifest: &AggregateManifest) -> HashSet<String> {
-    manifest
-        .nodes
-        .values()
-        .flat_map(|e| std::iter::once(e.glb.clone()).chain(e.parts.clone()))
-        .collect()
+    manifest.blobs().cloned().collect()
 }
 
 impl AggregateStore for AggregateSink<'_> {
@@ -132,6 +128,10 @@ impl AggregateStore for AggregateSink<'_> {
             .map_err(|_| AggregateError::Tree("staging lock poisoned".into()))?
             .push(entry.clone());
         Ok(entry)
+    }
+
+    fn stage_blob(&self, bytes: &[u8]) -> Result<String, AggregateError> {
+        self.blobs.stage(bytes).map_err(store_error)
     }
 
     fn commit(&self) -> Result<(), AggregateError> {

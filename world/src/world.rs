@@ -25,7 +25,7 @@ use std::time::{Duration, Instant};
 use glam::Affine3A;
 use horizon_aggregate::{
     build_aggregates_until, AggregateManifest, AggregateOptions, BuildOptions, BuildReport,
-    Progress,
+    ImpostorPolicy, Progress,
 };
 use horizon_bvh::{Aabb, BvhOptions, Cut, CutQuery, NodeId};
 use horizon_descriptors::{csd_distance, zernike_distance};
@@ -1121,6 +1121,7 @@ impl World {
         let build = BuildOptions {
             aggregate: options,
             world_textures: self.models.texture_totals()?,
+            impostors: ImpostorPolicy::WherePaying,
         };
         let outcome =
             build_aggregates_until(&tree.bvh, &self.models, &sink, &build, progress, stop);
