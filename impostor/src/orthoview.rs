@@ -20,7 +20,7 @@
 //!   `q = 2 sqrt(min_solid_angle / (pi * pixel_solid_angle)) / cos(theta)`, 95 at the
 //!   defaults (0.001 sr, 3.0e-7 sr, [`WORLD_DIRECTIONS`]' theta of 46.4 degrees).
 //! - [`WORLD_DIRECTIONS`] are the nine a world's impostors are made from (why: see there).
-
+//!
 //! An orthoview's image plane is perpendicular to its direction and covers the projection of
 //! its box; pixels are square. Depth 0 is an empty pixel; 1..=65535 spans the box's extent
 //! along the direction, nearest first.
