@@ -368,13 +368,11 @@ fn build(
     report.failed.sort();
     // Stage 4: the impostors, from the aggregates just built or reused.
     let impostors = if options.impostors != ImpostorPolicy::Off && only.is_none() {
-        let previous = store.manifest()?;
         let (impostors, impostor_report) = build_impostors(
             bvh,
             models,
             store,
             &entries,
-            previous.as_ref(),
             options.impostors,
             options.aggregate.min_solid_angle as f32,
             stop,

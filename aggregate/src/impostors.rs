@@ -36,7 +36,7 @@ use serde::{Deserialize, Serialize};
 use crate::error::AggregateError;
 use crate::keys::KeyHasher;
 use crate::source::ModelSource;
-use crate::store::{AggregateEntry, AggregateManifest, AggregateStore};
+use crate::store::{AggregateEntry, AggregateStore};
 
 /// Version of the impostor format; part of every impostor key.
 pub const IMPOSTOR_FORMAT: u32 = 1;
@@ -167,14 +167,14 @@ pub struct ImpostorReport {
     pub seconds: f64,
 }
 
-/// Builds (or reuses) the impostor of every node that gets one (see the module docs).
-/// `aggregates` and `keys` are the build's; `previous` is the manifest it started from.
+/// Builds (or reuses) the impostor of every node that gets one (see the module docs), for
+/// the build's `aggregates`; the store's manifest (the build's predecessor) has the impostors
+/// that may be reused.
 pub fn build_impostors(
     bvh: &Bvh,
     models: &dyn ModelSource,
     store: &dyn AggregateStore,
     aggregates: &BTreeMap<u32, AggregateEntry>,
-    previous: Option<&AggregateManifest>,
     policy: ImpostorPolicy,
     min_solid_angle: f32,
     stop: &(dyn Fn() -> bool + Sync),
@@ -199,6 +199,7 @@ pub fn build_impostors(
         h.write(aggregates[&node].key.as_bytes());
         h.finish_hex()
     };
+    let previous = store.manifest()?;
     let known: HashMap<&str, &ImpostorEntry> = previous
         .iter()
         .flat_map(|m| m.impostors.values())
@@ -394,15 +395,18 @@ fn encode(
 /// [`PREPARED_CACHE_BYTES`] (over it, the cache starts again).
 #[derive(Default)]
 struct PreparedCache {
-    inner: Mutex<(HashMap<u64, (Arc<PreparedMesh>, Aabb)>, usize)>,
+    inner: Mutex<(HashMap<u64, Prepared>, usize)>,
 }
+
+/// A model ready to ray-cast, and its bounds.
+type Prepared = (Arc<PreparedMesh>, Aabb);
 
 impl PreparedCache {
     fn get(
         &self,
         models: &dyn ModelSource,
         model: u64,
-    ) -> Result<(Arc<PreparedMesh>, Aabb), AggregateError> {
+    ) -> Result<Prepared, AggregateError> {
         if let Ok(m) = self.inner.lock() {
             if let Some(hit) = m.0.get(&model) {
                 return Ok(hit.clone());
