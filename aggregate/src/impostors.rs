@@ -16,9 +16,9 @@
 //! 4. **encode**: three lossless PNGs per direction (colour, 16-bit depth, octahedral
 //!    normals), content-addressed through the store, committed once.
 //!
-//! The world's q and directions: `horizon_impostor::world_resolution` and
-//! `WORLD_DIRECTIONS`, at the options' `min_solid_angle` and the clients' default
-//! [`PIXEL_SOLID_ANGLE`].
+//! A node's q and the directions: `horizon_impostor::node_resolution` (pixel-exact from where
+//! the cut would first draw the node's aggregate) and `WORLD_DIRECTIONS`, at the options'
+//! `min_solid_angle` and the clients' default [`PIXEL_SOLID_ANGLE`].
 
 use std::collections::{BTreeMap, HashMap, HashSet};
 use std::sync::{Arc, Mutex};
@@ -27,7 +27,7 @@ use std::time::Instant;
 use glam::Vec3;
 use horizon_bvh::{Bvh, NodeId, ObjectId};
 use horizon_impostor::{
-    world_resolution, Orthoview, PreparedMesh, SceneBuilder, VIEWS_SERVED, WORLD_DIRECTIONS,
+    node_resolution, Orthoview, PreparedMesh, SceneBuilder, VIEWS_SERVED, WORLD_DIRECTIONS,
 };
 use horizon_mesh::Aabb;
 use rayon::prelude::*;
@@ -46,8 +46,9 @@ pub const IMPOSTOR_FORMAT: u32 = 1;
 pub const PIXEL_SOLID_ANGLE: f32 = 3.0e-7;
 
 /// Encoded bytes an orthoview pixel is taken to cost when choosing which nodes get an
-/// impostor (colour, depth and normals together, PNG-compressed, empty pixels included).
-pub const BYTES_PER_PIXEL: f64 = 2.0;
+/// impostor (colour, depth and normals together, PNG-compressed, empty pixels included):
+/// 0.28 to 0.42 measured on the city worlds (`lab/results/impostors.md`), rounded up.
+pub const BYTES_PER_PIXEL: f64 = 0.5;
 
 /// Decoded meshes kept for ray casting, as an estimate of their bytes.
 const PREPARED_CACHE_BYTES: usize = 2 << 30;
@@ -95,8 +96,8 @@ pub struct ImpostorView {
     pub depth: String,
     /// Of the normal PNG (grey and alpha: the two octahedral coordinates).
     pub normal: String,
-    /// The three PNGs' bytes together.
-    pub bytes: u64,
+    /// Bytes of the three PNGs: colour, depth, normals.
+    pub bytes: [u64; 3],
 }
 
 impl ImpostorEntry {
@@ -110,7 +111,7 @@ impl ImpostorEntry {
 
     /// Bytes of every stored image.
     pub fn bytes(&self) -> u64 {
-        self.views.iter().map(|v| v.bytes).sum()
+        self.views.iter().flat_map(|v| v.bytes).sum()
     }
 
     /// The largest pixel of any of its orthoviews, world units: the impostor is within one
@@ -159,7 +160,7 @@ pub struct ImpostorReport {
     pub reused: usize,
     /// Of those built, ray-cast from objects (the rest were composited).
     pub rendered: usize,
-    /// The world's q.
+    /// The largest q of a node's orthoviews.
     pub resolution: u32,
     /// Bytes of every impostor of the tree.
     pub bytes_total: u64,
@@ -180,19 +181,22 @@ pub fn build_impostors(
     stop: &(dyn Fn() -> bool + Sync),
 ) -> Result<(BTreeMap<u32, ImpostorEntry>, ImpostorReport), AggregateError> {
     let start = Instant::now();
-    let q = world_resolution(min_solid_angle, PIXEL_SOLID_ANGLE);
-    let mut report = ImpostorReport {
-        resolution: q,
-        ..ImpostorReport::default()
+    let q_of = |node: u32| -> u32 {
+        bvh.node(NodeId(node)).map_or(horizon_impostor::MIN_Q, |n| {
+            let b = n.aabb();
+            let extent = (b.max - b.min).length();
+            node_resolution(extent, n.r_max(), min_solid_angle, PIXEL_SOLID_ANGLE)
+        })
     };
+    let mut report = ImpostorReport::default();
     // Stage 1: choose.
-    let chosen = choose(aggregates, policy, q);
+    let chosen = choose(aggregates, policy, &q_of);
     // Stage 2: keys, and what the previous manifest already has.
     let key_of = |node: u32| -> String {
         let mut h = KeyHasher::new();
         h.write(b"impostor");
         h.write(&IMPOSTOR_FORMAT.to_le_bytes());
-        h.write(&q.to_le_bytes());
+        h.write(&q_of(node).to_le_bytes());
         for d in WORLD_DIRECTIONS {
             h.write(&d.map(|c| c as u8));
         }
@@ -258,9 +262,9 @@ pub fn build_impostors(
                                 .map(Arc::new),
                         })
                         .collect::<Result<Vec<_>, _>>()?;
-                    composite_views(&kids, q)
+                    composite_views(&kids, q_of(node.0))
                 } else {
-                    render_views(bvh, node, models, &prepared, q)?
+                    render_views(bvh, node, models, &prepared, q_of(node.0))?
                 };
                 Ok((node.0, Arc::new(views), !composite))
             })
@@ -277,6 +281,12 @@ pub fn build_impostors(
     }
     store.commit()?;
     report.nodes = out.len();
+    report.resolution = out
+        .values()
+        .flat_map(|e| &e.views)
+        .map(|v| v.width.max(v.height))
+        .max()
+        .unwrap_or(0);
     report.bytes_total = out.values().map(ImpostorEntry::bytes).sum();
     report.seconds = start.elapsed().as_secs_f64();
     Ok((out, report))
@@ -286,14 +296,17 @@ pub fn build_impostors(
 fn choose(
     aggregates: &BTreeMap<u32, AggregateEntry>,
     policy: ImpostorPolicy,
-    q: u32,
+    q_of: &dyn Fn(u32) -> u32,
 ) -> HashSet<u32> {
-    let served = VIEWS_SERVED as f64 * f64::from(q) * f64::from(q) * BYTES_PER_PIXEL;
+    let served = |n: u32| {
+        let q = f64::from(q_of(n));
+        VIEWS_SERVED as f64 * q * q * BYTES_PER_PIXEL
+    };
     aggregates
         .iter()
-        .filter(|(_, e)| match policy {
+        .filter(|(&n, e)| match policy {
             ImpostorPolicy::Off => false,
-            ImpostorPolicy::WherePaying => e.stats.bytes as f64 >= served,
+            ImpostorPolicy::WherePaying => e.stats.bytes as f64 >= served(n),
             ImpostorPolicy::Everywhere => true,
         })
         .map(|(&n, _)| n)
@@ -376,7 +389,7 @@ fn encode(
                 width: v.width,
                 height: v.height,
                 pixel: v.pixel_size(),
-                bytes: (color.len() + depth.len() + normal.len()) as u64,
+                bytes: [color.len(), depth.len(), normal.len()].map(|n| n as u64),
                 color: store.stage_blob(&color)?,
                 depth: store.stage_blob(&depth)?,
                 normal: store.stage_blob(&normal)?,
@@ -402,11 +415,7 @@ struct PreparedCache {
 type Prepared = (Arc<PreparedMesh>, Aabb);
 
 impl PreparedCache {
-    fn get(
-        &self,
-        models: &dyn ModelSource,
-        model: u64,
-    ) -> Result<Prepared, AggregateError> {
+    fn get(&self, models: &dyn ModelSource, model: u64) -> Result<Prepared, AggregateError> {
         if let Ok(m) = self.inner.lock() {
             if let Some(hit) = m.0.get(&model) {
                 return Ok(hit.clone());

@@ -74,6 +74,7 @@ pub(crate) fn cut_query(view: &View) -> Vec<(&'static str, String)> {
         ("min_solid_angle", view.min_solid_angle.to_string()),
         ("pixel_solid_angle", view.pixel_solid_angle.to_string()),
         ("max_pixel_error", view.max_pixel_error.to_string()),
+        ("impostors", view.impostors.to_string()),
     ];
     let b = &view.budgets;
     for (name, value) in [
@@ -186,6 +187,7 @@ mod tests {
             min_solid_angle: 1e-3,
             pixel_solid_angle: 3.0e-7,
             max_pixel_error: 0.5,
+            impostors: false,
             budgets: Budgets {
                 max_entries: Some(10),
                 max_triangles: Some(7),
@@ -201,6 +203,7 @@ mod tests {
                 "min_solid_angle",
                 "pixel_solid_angle",
                 "max_pixel_error",
+                "impostors",
                 "max_entries",
                 "max_triangles"
             ]
@@ -214,7 +217,8 @@ mod tests {
         assert_eq!(query[1].1.parse::<f64>().ok(), Some(1e-3));
         assert_eq!(query[2].1.parse::<f64>().ok(), Some(3.0e-7));
         assert_eq!(query[3].1.parse::<f64>().ok(), Some(0.5));
-        assert_eq!(query[4].1, "10");
+        assert_eq!(query[4].1, "false");
+        assert_eq!(query[5].1, "10");
     }
 
     #[test]

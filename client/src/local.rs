@@ -521,6 +521,7 @@ mod tests {
             center: [0.0, 1.0, 2.0],
             radius: 1.5,
             covers,
+            impostor: None,
         }
     }
 

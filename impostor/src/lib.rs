@@ -22,8 +22,8 @@ pub use camera::Camera;
 pub use compare::{compare, Comparison};
 pub use frame::Frame;
 pub use orthoview::{
-    canonical_directions, facing, resolution, world_resolution, Orthoview, VIEWS_SERVED,
-    WORLD_DIRECTIONS, WORLD_THETA,
+    canonical_directions, facing, node_resolution, resolution, Orthoview, MAX_Q, MIN_Q,
+    VIEWS_SERVED, WORLD_DIRECTIONS, WORLD_THETA,
 };
 pub use scene::{PreparedMesh, Scene, SceneBuilder, Surface};
 pub use shade::to_srgb;

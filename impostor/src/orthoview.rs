@@ -14,11 +14,12 @@
 //!   width of a screen pixel at distance r) is `r * pixel_angle` and `pixel_angle` is the square
 //!   root of the view's `pixel_solid_angle`: adjacent orthoview pixels then land on adjacent
 //!   screen pixels for a surface seen `theta` from the nearest direction at distance `r`.
-//! - [`world_resolution`] fixes `s / r`: a node is handed to its impostor once its bounding
-//!   sphere subtends `min_solid_angle` (`pi (s/2)^2 / r^2 = min_solid_angle`), so every node
-//!   gets the same q, as every cell of the paper's octree does:
-//!   `q = 2 sqrt(min_solid_angle / (pi * pixel_solid_angle)) / cos(theta)`, 95 at the
-//!   defaults (0.001 sr, 3.0e-7 sr, [`WORLD_DIRECTIONS`]' theta of 46.4 degrees).
+//! - [`node_resolution`] sets `r`, the nearest distance an impostor is shown from, to where
+//!   the cut would first draw the node with its aggregate: where an object of the node's
+//!   largest radius `r_max` subtends `min_solid_angle` (`r = r_max sqrt(pi /
+//!   min_solid_angle)`), for the clients' default pixel. The impostor then takes over from the
+//!   aggregate at that very distance. q is kept within [`MIN_Q`]..=[`MAX_Q`]: above it a
+//!   node's impostor is used only farther out, where its pixels shrink under a screen pixel.
 //! - [`WORLD_DIRECTIONS`] are the nine a world's impostors are made from (why: see there).
 //!
 //! An orthoview's image plane is perpendicular to its direction and covers the projection of
@@ -101,13 +102,23 @@ pub fn resolution(extent: f32, distance: f32, pixel_angle: f32, theta: f32) -> u
     }
 }
 
-/// The one q of a world's orthoviews (see the module docs): [`resolution`] for a node at the
-/// distance where its bounding sphere subtends `min_solid_angle`, for clients whose pixel
-/// subtends `pixel_solid_angle`, over [`WORLD_DIRECTIONS`].
-pub fn world_resolution(min_solid_angle: f32, pixel_solid_angle: f32) -> u32 {
-    // The extent 2 R of a sphere of radius R at the distance R sqrt(pi / Omega).
-    let distance = (std::f32::consts::PI / min_solid_angle).sqrt() * 0.5;
-    resolution(1.0, distance, pixel_solid_angle.sqrt(), WORLD_THETA)
+/// The fewest pixels along an orthoview's longer side.
+pub const MIN_Q: u32 = 16;
+/// The most: storage and ray casting grow with its square.
+pub const MAX_Q: u32 = 128;
+
+/// The q of a node's orthoviews (see the module docs): [`resolution`] for a node of linear
+/// extent `extent` whose largest object has radius `r_max`, shown from where that object
+/// subtends `min_solid_angle`, to clients whose pixel subtends `pixel_solid_angle`, over
+/// [`WORLD_DIRECTIONS`]; within [`MIN_Q`]..=[`MAX_Q`].
+pub fn node_resolution(
+    extent: f32,
+    r_max: f32,
+    min_solid_angle: f32,
+    pixel_solid_angle: f32,
+) -> u32 {
+    let distance = r_max * (std::f32::consts::PI / min_solid_angle).sqrt();
+    resolution(extent, distance, pixel_solid_angle.sqrt(), WORLD_THETA).clamp(MIN_Q, MAX_Q)
 }
 
 /// The [`VIEWS_SERVED`] directions of `directions` nearest to looking along `view` (from the

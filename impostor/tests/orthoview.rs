@@ -227,15 +227,24 @@ fn the_resolution_puts_one_orthoview_pixel_on_at_most_one_screen_pixel() {
         assert!(on_screen(q) <= 1.0 + 1e-4, "{q}");
         assert!(on_screen(q - 1.0) > 1.0, "{q} is more than needed");
     }
-    // The world's q: a node whose sphere subtends min_solid_angle, one pixel per pixel.
+    // A node's q: pixel-exact where its largest object subtends min_solid_angle.
     let (omega, pixel) = (1e-3f32, 3.0e-7f32);
-    let q = horizon_impostor::world_resolution(omega, pixel);
-    let distance = (std::f32::consts::PI / omega).sqrt() * 0.5;
+    let q = horizon_impostor::node_resolution(3.0, 2.0, omega, pixel);
+    let distance = 2.0 * (std::f32::consts::PI / omega).sqrt();
     assert_eq!(
         q,
-        resolution(1.0, distance, pixel.sqrt(), horizon_impostor::WORLD_THETA)
+        resolution(3.0, distance, pixel.sqrt(), horizon_impostor::WORLD_THETA)
     );
-    assert!(horizon_impostor::world_resolution(omega * 4.0, pixel) > q);
+    assert!((horizon_impostor::MIN_Q..horizon_impostor::MAX_Q).contains(&q));
+    // Within bounds however large or small the node.
+    assert_eq!(
+        horizon_impostor::node_resolution(1e5, 1.0, omega, pixel),
+        horizon_impostor::MAX_Q
+    );
+    assert_eq!(
+        horizon_impostor::node_resolution(0.1, 1.0, omega, pixel),
+        horizon_impostor::MIN_Q
+    );
 }
 
 #[test]

@@ -235,6 +235,8 @@ pub fn measure(args: &Args) -> anyhow::Result<Report> {
         let mut view = View::at(camera.eye.to_array().map(f64::from));
         view.min_solid_angle = args.min_solid_angle;
         view.max_pixel_error = args.max_pixel_error;
+        // The ray caster draws meshes: cuts of meshes alone.
+        view.impostors = false;
         // The rendered image's own pixel, so that levels of detail are chosen for it.
         view.pixel_solid_angle = f64::from(args.fov.to_radians() / args.height as f32).powi(2);
         view.budgets = Budgets {
@@ -398,6 +400,7 @@ fn focus(
         draw_calls: aggregate.stats.submeshes.max(1) as u64,
         center: centre.to_array(),
         radius: 0.0,
+        impostor: None,
         covers: objects.len() as u64,
     }];
     let started = Instant::now();

@@ -34,6 +34,10 @@ pub struct View {
     /// detail may show at its nearest point (0: full detail): at least 0.
     #[serde(default = "default_max_pixel_error")]
     pub max_pixel_error: f64,
+    /// Whether the client draws impostors (default true). Where a node's impostor is within
+    /// a pixel of its content, the cut sends it instead of the node's aggregate.
+    #[serde(default = "default_impostors")]
+    pub impostors: bool,
     /// What the cut may cost.
     #[serde(default)]
     pub budgets: Budgets,
@@ -51,6 +55,10 @@ fn default_max_pixel_error() -> f64 {
     DEFAULT_MAX_PIXEL_ERROR
 }
 
+fn default_impostors() -> bool {
+    true
+}
+
 /// The largest `max_entries` a view may ask for.
 pub const MAX_ENTRIES_LIMIT: u64 = 1_000_000;
 
@@ -62,6 +70,7 @@ impl View {
             min_solid_angle: DEFAULT_MIN_SOLID_ANGLE,
             pixel_solid_angle: DEFAULT_PIXEL_SOLID_ANGLE,
             max_pixel_error: DEFAULT_MAX_PIXEL_ERROR,
+            impostors: true,
             budgets: Budgets::default(),
         }
     }
@@ -222,13 +231,15 @@ pub struct Placement {
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct Entry {
     /// Names one content, never two: `o:<object id>@<generation that placed it>` for an
-    /// object, `n:<node id>@<asset hash>` for an aggregate.
+    /// object, `n:<node id>@<asset hash>` for an aggregate, `n:<node id>@<hash of its views>`
+    /// for an impostor.
     pub id: String,
     /// What it is.
     pub kind: EntryKind,
     /// The blobs it needs.
     pub assets: Vec<Asset>,
-    /// Where they are drawn (an aggregate's mesh is in world space: the identity).
+    /// Where they are drawn (an aggregate's mesh is in world space: the identity; an impostor
+    /// has none, its views say where they are).
     pub placements: Vec<Placement>,
     /// The level of detail of an object's model (0: the model as uploaded; see the model's
     /// `levels`): the coarsest whose error, projected at the object's nearest point, is at
@@ -249,4 +260,46 @@ pub struct Entry {
     pub radius: f32,
     /// The objects of the cut's generation that it stands for.
     pub covers: u64,
+    /// An impostor's orthoviews (kind `impostor` only).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub impostor: Option<Impostor>,
+}
+
+/// The orthoviews of an impostor entry that face the viewer (Chaudhuri et al. 2009): each an
+/// orthographic depth image of the box `min`..`max` looking along a canonical direction.
+///
+/// A view's image plane is perpendicular to `direction`, with `u = normalize(up x d)` (`up` the
+/// world's y, or z when `d` is vertical) and `v = d x u`; pixel (0, 0)'s corner is at the
+/// smallest `u` and `v` of the box's corners, and pixels are square, `pixel` world units,
+/// `width` x `height` of them. Depth 1..=65535 spans the box's extent along `d` from its
+/// nearest corner; 0 is empty.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+pub struct Impostor {
+    /// The box's smallest corner.
+    pub min: [f32; 3],
+    /// Its largest.
+    pub max: [f32; 3],
+    /// Nearest the view direction first.
+    pub views: Vec<ImpostorView>,
+}
+
+/// One orthoview of an [`Impostor`]: three PNGs, named by their asset hashes.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+pub struct ImpostorView {
+    /// The canonical direction it looks along, from {-1, 0, 1}^3.
+    pub direction: [i8; 3],
+    /// Pixels across.
+    pub width: u32,
+    /// Pixels down.
+    pub height: u32,
+    /// A pixel's size, world units.
+    pub pixel: f32,
+    /// sRGB colour, alpha the pixel's coverage (RGBA 8).
+    pub color: String,
+    /// Depth (grey 16).
+    pub depth: String,
+    /// Octahedral normals (grey and alpha 8: the two coordinates).
+    pub normal: String,
 }

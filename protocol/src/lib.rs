@@ -19,8 +19,8 @@ mod stream;
 mod world;
 
 pub use cut::{
-    Asset, AssetRole, Budgets, CutResponse, Entry, EntryKind, Placement, StoppedBy, View,
-    DEFAULT_MAX_ENTRIES, DEFAULT_MAX_PIXEL_ERROR, DEFAULT_MIN_SOLID_ANGLE,
+    Asset, AssetRole, Budgets, CutResponse, Entry, EntryKind, Impostor, ImpostorView, Placement,
+    StoppedBy, View, DEFAULT_MAX_ENTRIES, DEFAULT_MAX_PIXEL_ERROR, DEFAULT_MIN_SOLID_ANGLE,
     DEFAULT_PIXEL_SOLID_ANGLE, MAX_ENTRIES_LIMIT,
 };
 pub use error::{ErrorBody, ErrorCode, ErrorDetail};

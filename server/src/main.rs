@@ -97,6 +97,9 @@ enum Command {
         /// 100 textures or 64 MB of them in the world) or never.
         #[arg(long, value_enum, default_value = "always")]
         atlas: AtlasArg,
+        /// Which nodes get orthoview impostors.
+        #[arg(long, value_enum, default_value = "where-paying")]
+        impostors: ImpostorArg,
         /// Print the summary as JSON.
         #[arg(long)]
         json: bool,
@@ -130,6 +133,9 @@ enum Command {
         /// Address to listen on (port 0: any free port).
         #[arg(long, default_value = "127.0.0.1:8080")]
         listen: SocketAddr,
+        /// Which nodes the live rebuild gives orthoview impostors.
+        #[arg(long, value_enum, default_value = "where-paying")]
+        impostors: ImpostorArg,
     },
     /// Bearer tokens for writing to a world.
     #[command(subcommand)]
@@ -213,6 +219,27 @@ impl From<AtlasArg> for horizon_aggregate::AtlasPolicy {
     }
 }
 
+/// `--impostors` of `horizon build` and `horizon serve`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+enum ImpostorArg {
+    /// Nodes whose impostor costs less to serve than their aggregate.
+    WherePaying,
+    /// Every node.
+    Everywhere,
+    /// None.
+    Off,
+}
+
+impl From<ImpostorArg> for horizon_aggregate::ImpostorPolicy {
+    fn from(a: ImpostorArg) -> Self {
+        match a {
+            ImpostorArg::WherePaying => Self::WherePaying,
+            ImpostorArg::Everywhere => Self::Everywhere,
+            ImpostorArg::Off => Self::Off,
+        }
+    }
+}
+
 /// Sizes rayon's global pool (`--jobs`).
 fn set_jobs(jobs: Option<usize>) -> anyhow::Result<()> {
     if let Some(n) = jobs {
@@ -257,6 +284,7 @@ fn main() -> ExitCode {
             pixels_per_triangle,
             min_solid_angle,
             atlas,
+            impostors,
             json,
         } => set_jobs(jobs).and_then(|()| {
             let options = (!bvh_only).then_some(AggregateOptions {
@@ -265,7 +293,7 @@ fn main() -> ExitCode {
                 atlas: atlas.into(),
                 ..AggregateOptions::default()
             });
-            world_cmd::build(&dir, mu, omega, options, json)
+            world_cmd::build(&dir, mu, omega, options, impostors.into(), json)
         }),
         Command::Cut {
             dir,
@@ -275,7 +303,11 @@ fn main() -> ExitCode {
             json,
             explain,
         } => world_cmd::cut(&dir, &pos, min_solid_angle, max_results, json, explain),
-        Command::Serve { dir, listen } => serve_cmd::serve(&dir, listen),
+        Command::Serve {
+            dir,
+            listen,
+            impostors,
+        } => serve_cmd::serve(&dir, listen, impostors.into()),
         Command::Token(TokenCommand::Create {
             dir,
             user,

@@ -7,6 +7,7 @@ use std::path::Path;
 use std::sync::Arc;
 
 use anyhow::Context;
+use horizon_aggregate::ImpostorPolicy;
 use horizon_bvh::{DEFAULT_MU, DEFAULT_W};
 use horizon_server::outln;
 use horizon_server::service::{self, AppState, Config};
@@ -17,9 +18,10 @@ use serde::Serialize;
 /// Serves the world in `dir` (an empty world if `dir` is missing or empty) on `listen` until
 /// SIGTERM or Ctrl-C. The first line on stdout is `listening on http://ADDR`, the address
 /// actually bound.
-pub fn serve(dir: &Path, listen: SocketAddr) -> anyhow::Result<()> {
+pub fn serve(dir: &Path, listen: SocketAddr, impostors: ImpostorPolicy) -> anyhow::Result<()> {
     init_logging();
     let world = World::open_or_create(dir)?;
+    world.set_impostors(impostors);
     serve_world(world, listen)
 }
 

@@ -6,7 +6,7 @@ use std::path::Path;
 use std::time::Instant;
 
 use glam::Vec3;
-use horizon_aggregate::{AggregateOptions, Progress};
+use horizon_aggregate::{AggregateOptions, ImpostorPolicy, Progress};
 use horizon_bvh::{CutItem, CutQuery, EntryKind, ObjectId};
 use horizon_server::outln;
 use horizon_server::terminal::{note, ProgressBar};
@@ -40,10 +40,12 @@ pub fn build(
     mu: f32,
     w: f32,
     aggregates: Option<AggregateOptions>,
+    impostors: ImpostorPolicy,
     json: bool,
 ) -> anyhow::Result<()> {
     let t0 = Instant::now();
     let world = World::open(dir)?;
+    world.set_impostors(impostors);
     anyhow::ensure!(
         world.is_exclusive(),
         "another process serves or builds {} (stop it first)",
@@ -148,6 +150,19 @@ fn print_summary(dir: &Path, s: &BuildSummary) -> std::io::Result<()> {
             if a.atlas { ", atlased" } else { "" },
             r.generation,
         )?;
+        if let Some(i) = &a.impostors {
+            outln!(
+                "impostors: {} nodes ({} built, {} ray-cast, {} reused), {} px, {:.1} MB in all ({:.0}% of the aggregates); {:.1} s",
+                i.nodes,
+                i.built,
+                i.rendered,
+                i.reused,
+                i.resolution,
+                i.bytes_total as f64 / 1e6,
+                100.0 * i.bytes_total as f64 / a.bytes_total.max(1) as f64,
+                i.seconds,
+            )?;
+        }
     }
     Ok(())
 }

@@ -20,6 +20,8 @@ const params = new URLSearchParams(location.search);
 const MIN_SOLID_ANGLE = Number(params.get('min_solid_angle') || 0.001);
 const MAX_ENTRIES = Number(params.get('max_entries') || 4000);
 const MAX_PIXEL_ERROR = params.has('max_pixel_error') ? Number(params.get('max_pixel_error')) : 1;
+// The viewer does not draw orthoview impostors yet: it asks for meshes everywhere.
+const IMPOSTORS = false;
 const CACHE_MB = Number(params.get('cache_mb') || 768);
 const FULL = params.has('full');
 const ANTIALIAS = params.get('antialias') !== '0';
@@ -93,6 +95,7 @@ function view() {
     min_solid_angle: MIN_SOLID_ANGLE,
     pixel_solid_angle: pixel * pixel,
     max_pixel_error: MAX_PIXEL_ERROR,
+    impostors: IMPOSTORS,
     budgets: { max_entries: MAX_ENTRIES },
   };
 }

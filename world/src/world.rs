@@ -100,6 +100,8 @@ pub struct World {
     changed: Condvar,
     /// Called after every committed mutation and publish ([`World::on_change`]).
     listeners: Listeners,
+    /// Which nodes rebuilds give impostors ([`World::set_impostors`]).
+    impostors: Mutex<ImpostorPolicy>,
 }
 
 /// The functions told of every committed mutation and publish.
@@ -348,6 +350,7 @@ impl World {
             entries: Mutex::new(None),
             changed: Condvar::new(),
             listeners: Listeners::default(),
+            impostors: Mutex::new(ImpostorPolicy::WherePaying),
         })
     }
 
@@ -1075,6 +1078,15 @@ impl World {
             .map_err(|_| WorldError::Inconsistent("entry cache lock poisoned".into()))
     }
 
+    /// Which nodes the next rebuilds give orthoview impostors (default: where an impostor
+    /// costs less to serve than the aggregate). A rebuild reuses the impostors of an earlier
+    /// one only where both choose them.
+    pub fn set_impostors(&self, policy: ImpostorPolicy) {
+        if let Ok(mut p) = self.impostors.lock() {
+            *p = policy;
+        }
+    }
+
     /// The rebuild: a copy of the tree at the current generation gets every node's aggregate
     /// (nodes whose inputs did not change are reused), the new manifest is published as one
     /// step, and blobs that neither it nor the manifest before it names go. Changes committed
@@ -1121,7 +1133,10 @@ impl World {
         let build = BuildOptions {
             aggregate: options,
             world_textures: self.models.texture_totals()?,
-            impostors: ImpostorPolicy::WherePaying,
+            impostors: self
+                .impostors
+                .lock()
+                .map_or(ImpostorPolicy::WherePaying, |p| *p),
         };
         let outcome =
             build_aggregates_until(&tree.bvh, &self.models, &sink, &build, progress, stop);

@@ -20,6 +20,15 @@
 //!   is not sent. That aggregate may still draw a moved object at its old place or a deleted
 //!   one until the next publish: a bounded lag in what is drawn, never in what is counted.
 //!
+//! Impostors (Chaudhuri et al. 2009; `horizon_aggregate::impostors`): a node in the cut that
+//! has an impostor is sent as its impostor instead of its aggregate when the view allows
+//! impostors, no orthoview pixel covers more than a screen pixel there (the handover: the
+//! nearest point of the node's outer sphere at least `pixel / pixel_angle` away, which the
+//! world's q puts where the node's sphere subtends `min_solid_angle` at the default pixel),
+//! and some views face the eye ([`horizon_impostor::facing`]: the three nearest the direction
+//! to the node). Only nodes the cut would draw with an aggregate become impostors, so every
+//! object that subtends `min_solid_angle` is still its own entry, and the cut stays complete.
+//!
 //! Budgets count a shared asset once (bytes and draw calls) and triangles per entry, as a
 //! client drawing each asset's placements in one instanced batch spends them.
 //!
@@ -36,8 +45,8 @@ use glam::{Affine3A, Vec3};
 use horizon_aggregate::AggregateManifest;
 use horizon_bvh::{solid_angle, worst_case_solid_angle, NodeId, ObjectId};
 use horizon_protocol::{
-    Addition, Asset, AssetRole, Budgets, Entry, EntryKind, Placement, Removal, RemoveReason,
-    StoppedBy, View, DEFAULT_MAX_ENTRIES,
+    Addition, Asset, AssetRole, Budgets, Entry, EntryKind, Impostor, ImpostorView, Placement,
+    Removal, RemoveReason, StoppedBy, View, DEFAULT_MAX_ENTRIES,
 };
 use horizon_world::{Served, World, WorldError};
 
@@ -119,6 +128,11 @@ pub struct Decisions {
     pending: Vec<(ObjectId, bool)>,
     /// Each object entry's own level of detail (before models share levels).
     levels: Vec<(ObjectId, u8)>,
+    /// Every node in the cut that has an impostor, and the views sent of it (0: none, its
+    /// aggregate draws it), with what deciding that again needs.
+    impostors: Vec<(NodeId, u16)>,
+    nodes: Arc<NodeAssets>,
+    pixel_angle: f32,
 }
 
 impl Decisions {
@@ -137,6 +151,15 @@ impl Decisions {
             .iter()
             .any(|&(o, seen)| subtends(bvh, o, eye, min) != Some(seen))
         {
+            return false;
+        }
+        let imp = |n: NodeId| {
+            let asset = self.nodes.get(n.0 as usize).and_then(Option::as_ref);
+            asset.and_then(|a| a.impostor.as_ref())
+        };
+        if self.impostors.iter().any(|&(n, views)| {
+            imp(n).map_or(0, |i| impostor_views(bvh, n, i, eye, self.pixel_angle)) != views
+        }) {
             return false;
         }
         if self.over_at_seed {
@@ -255,6 +278,15 @@ pub enum Key {
         /// The first 64 bits of its GLB's hash.
         content: u64,
     },
+    /// A node drawn as its impostor, and which of its views.
+    Impostor {
+        /// The node.
+        node: u32,
+        /// The first 64 bits of its impostor's key.
+        content: u64,
+        /// The views sent, a bit per index in the impostor's views.
+        views: u16,
+    },
 }
 
 /// What a planned entry draws, besides what its [`Key`] names.
@@ -273,6 +305,8 @@ pub enum Drawn {
     },
     /// The node's published aggregate (in the plan's manifest).
     Aggregate,
+    /// The node's published impostor (in the plan's manifest), the key's views of it.
+    Impostor,
 }
 
 /// What the cut needs of a model: its levels of detail, level 0 (the stored GLB) first.
@@ -346,8 +380,8 @@ impl ModelAsset {
     }
 }
 
-/// What the planner needs of a node's published aggregate.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+/// What the planner needs of a node's published aggregate, and of its impostor if any.
+#[derive(Clone, Debug, PartialEq)]
 pub struct NodeAsset {
     /// GLB bytes.
     pub bytes: u64,
@@ -357,6 +391,63 @@ pub struct NodeAsset {
     pub draw_calls: u64,
     /// The first 64 bits of the GLB's hash.
     pub content: u64,
+    /// Its impostor.
+    pub impostor: Option<NodeImpostor>,
+}
+
+/// What the planner needs of a node's published impostor.
+#[derive(Clone, Debug, PartialEq)]
+pub struct NodeImpostor {
+    /// The largest orthoview pixel, world units.
+    pub pixel: f32,
+    /// The first 64 bits of its key.
+    pub content: u64,
+    /// Each view's direction.
+    pub directions: Vec<[i8; 3]>,
+    /// Each view's bytes (three images).
+    pub bytes: Vec<u64>,
+}
+
+impl NodeImpostor {
+    fn of(entry: &horizon_aggregate::ImpostorEntry) -> Self {
+        Self {
+            pixel: entry.pixel(),
+            content: content_bits(&entry.key),
+            directions: entry.views.iter().map(|v| v.direction).collect(),
+            bytes: entry.views.iter().map(|v| v.bytes.iter().sum()).collect(),
+        }
+    }
+
+    /// What sending the views of `mask` costs: bytes and draw calls (one per view).
+    fn cost(&self, mask: u16) -> (u64, u64) {
+        let chosen = (0..self.bytes.len()).filter(|&i| mask & (1 << i) != 0);
+        chosen.fold((0, 0), |(b, d), i| (b + self.bytes[i], d + 1))
+    }
+}
+
+/// The views of `imp` a cut at `eye` sends for `node`, a bit per view; 0 where the node is
+/// drawn by its aggregate: the eye is within the handover distance, or no view faces it (see
+/// the module docs). [`Planner`] and [`Decisions::hold_at`] both use it.
+fn impostor_views(
+    bvh: &horizon_bvh::Bvh,
+    node: NodeId,
+    imp: &NodeImpostor,
+    eye: Vec3,
+    pixel_angle: f32,
+) -> u16 {
+    let Some(n) = bvh.node(node) else {
+        return 0;
+    };
+    let sphere = n.outer_sphere();
+    let towards = sphere.centre - eye;
+    let nearest = towards.length() - sphere.radius;
+    if !(nearest * pixel_angle >= imp.pixel) {
+        return 0;
+    }
+    horizon_impostor::facing(&imp.directions, towards)
+        .into_iter()
+        .filter(|&i| i < 16)
+        .fold(0, |m, i| m | (1 << i))
 }
 
 /// A manifest's aggregates by node id, for lookups on the planner's hot path.
@@ -467,7 +558,9 @@ fn index_nodes(manifest: &AggregateManifest) -> NodeAssets {
         .map_or(0, |&n| n as usize + 1);
     let mut nodes = vec![None; len];
     for (&n, entry) in &manifest.nodes {
-        nodes[n as usize] = Some(NodeAsset::of(entry));
+        let mut asset = NodeAsset::of(entry);
+        asset.impostor = manifest.impostors.get(&n).map(NodeImpostor::of);
+        nodes[n as usize] = Some(asset);
     }
     nodes
 }
@@ -481,6 +574,7 @@ impl NodeAsset {
             triangles: stats.triangles_out,
             draw_calls: stats.submeshes.max(1) as u64,
             content: content_bits(&entry.glb),
+            impostor: None,
         }
     }
 }
@@ -499,6 +593,7 @@ enum Unit {
 enum AssetKey {
     Model(u64, u8),
     Node(NodeId),
+    Impostor(NodeId, u16),
 }
 
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -705,6 +800,19 @@ impl<'a> Planner<'a> {
         self.nodes.get(node.0 as usize).and_then(Option::as_ref)
     }
 
+    /// The views of `node`'s impostor the cut sends (0: its aggregate draws it).
+    fn impostor_views(&self, node: NodeId) -> u16 {
+        if !self.view.impostors {
+            return 0;
+        }
+        match self.aggregate(node).and_then(|a| a.impostor.as_ref()) {
+            Some(imp) => {
+                impostor_views(&self.served.tree.bvh, node, imp, self.eye, self.pixel_angle)
+            }
+            None => 0,
+        }
+    }
+
     /// The pending objects a node's aggregate leaves to entries of their own.
     fn extracted(&self, node: NodeId) -> impl Iterator<Item = ObjectId> + '_ {
         let bvh = &self.served.tree.bvh;
@@ -741,14 +849,17 @@ impl<'a> Planner<'a> {
                     .node(node)
                     .map_or(0, |n| u64::from(n.count()));
                 if count > extracted.len() as u64 {
-                    if let Some(&a) = self.aggregate(node) {
-                        self.charge(
-                            AssetKey::Node(node),
-                            a.bytes,
-                            a.draw_calls,
-                            a.triangles,
-                            sign,
-                        );
+                    let views = self.impostor_views(node);
+                    if let Some(a) = self.aggregate(node) {
+                        let (key, bytes, draw_calls, triangles) =
+                            match a.impostor.as_ref().filter(|_| views != 0) {
+                                Some(imp) => {
+                                    let (bytes, calls) = imp.cost(views);
+                                    (AssetKey::Impostor(node, views), bytes, calls, 0)
+                                }
+                                None => (AssetKey::Node(node), a.bytes, a.draw_calls, a.triangles),
+                            };
+                        self.charge(key, bytes, draw_calls, triangles, sign);
                     }
                 }
                 if sign > 0 {
@@ -858,6 +969,23 @@ impl<'a> Planner<'a> {
                 })
                 .collect(),
             levels: Vec::new(),
+            impostors: if self.view.impostors {
+                self.units
+                    .iter()
+                    .filter_map(|u| match *u {
+                        Unit::Node(n) => {
+                            let a = self.aggregate(n)?;
+                            a.impostor.as_ref()?;
+                            Some((n, self.impostor_views(n)))
+                        }
+                        Unit::Object(_) => None,
+                    })
+                    .collect()
+            } else {
+                Vec::new()
+            },
+            nodes: self.nodes.clone(),
+            pixel_angle: self.pixel_angle,
         };
         let tree = self.served.tree;
         let published = self.served.published;
@@ -907,12 +1035,27 @@ impl<'a> Planner<'a> {
                         continue;
                     }
                     let sphere = n.outer_sphere();
+                    let views = self.impostor_views(node);
+                    let (key, what) = match entry.impostor.as_ref().filter(|_| views != 0) {
+                        Some(imp) => (
+                            Key::Impostor {
+                                node: node.0,
+                                content: imp.content,
+                                views,
+                            },
+                            Drawn::Impostor,
+                        ),
+                        None => (
+                            Key::Aggregate {
+                                node: node.0,
+                                content: entry.content,
+                            },
+                            Drawn::Aggregate,
+                        ),
+                    };
                     items.push(Planned {
-                        key: Key::Aggregate {
-                            node: node.0,
-                            content: entry.content,
-                        },
-                        what: Drawn::Aggregate,
+                        key,
+                        what,
                         covers,
                         pending: false,
                         center: sphere.centre.to_array(),
@@ -978,17 +1121,17 @@ impl Planned {
             && self.radius == other.radius
     }
 
-    /// An object's level of detail (0 for an aggregate).
+    /// An object's level of detail (0 for a node).
     fn level(&self) -> u8 {
         match self.key {
             Key::Object { level, .. } => level,
-            Key::Aggregate { .. } => 0,
+            Key::Aggregate { .. } | Key::Impostor { .. } => 0,
         }
     }
 
     fn node(&self) -> Option<NodeId> {
         match self.key {
-            Key::Aggregate { node, .. } => Some(NodeId(node)),
+            Key::Aggregate { node, .. } | Key::Impostor { node, .. } => Some(NodeId(node)),
             Key::Object { .. } => None,
         }
     }
@@ -996,7 +1139,7 @@ impl Planned {
     fn object(&self) -> Option<u64> {
         match self.key {
             Key::Object { object, .. } => Some(object),
-            Key::Aggregate { .. } => None,
+            Key::Aggregate { .. } | Key::Impostor { .. } => None,
         }
     }
 }
@@ -1075,11 +1218,91 @@ impl Plan {
                 let hash = self.aggregate(p).map_or("", |a| a.glb.as_str());
                 format!("n:{node}@{hash}")
             }
+            Key::Impostor { node, views, .. } => {
+                let key = self.impostor(p).map_or("", |i| i.key.as_str());
+                format!("n:{node}@{key}.{views:03x}")
+            }
+        }
+    }
+
+    /// The impostor a planned entry draws, if it is one.
+    fn impostor(&self, p: &Planned) -> Option<&horizon_aggregate::ImpostorEntry> {
+        let Key::Impostor { node, .. } = p.key else {
+            return None;
+        };
+        self.manifest.as_ref()?.impostors.get(&node)
+    }
+
+    /// An impostor entry: its views facing the eye, nearest the view direction first, with
+    /// their images as assets.
+    fn impostor_entry(&self, p: &Planned) -> Entry {
+        let Key::Impostor { views: mask, .. } = p.key else {
+            unreachable!("impostor_entry is only called for impostors");
+        };
+        let towards = Vec3::from(p.center) - eye_of(self.view.eye);
+        let mut chosen: Vec<&horizon_aggregate::ImpostorView> = self
+            .impostor(p)
+            .iter()
+            .flat_map(|i| i.views.iter().enumerate())
+            .filter(|(k, _)| *k < 16 && mask & (1 << k) != 0)
+            .map(|(_, v)| v)
+            .collect();
+        let along = |v: &horizon_aggregate::ImpostorView| {
+            let d = v.direction.map(f32::from);
+            Vec3::from(d).normalize_or_zero().dot(towards)
+        };
+        chosen.sort_by(|a, b| along(b).total_cmp(&along(a)));
+        let assets: Vec<Asset> = chosen
+            .iter()
+            .flat_map(|v| {
+                [&v.color, &v.depth, &v.normal]
+                    .into_iter()
+                    .zip(v.bytes)
+                    .map(|(hash, bytes)| Asset {
+                        hash: hash.clone(),
+                        bytes,
+                        role: AssetRole::Orthoview,
+                    })
+            })
+            .collect();
+        let imp = self.impostor(p);
+        Entry {
+            id: self.id(p),
+            kind: EntryKind::Impostor,
+            bytes: assets.iter().map(|a| a.bytes).sum(),
+            assets,
+            placements: Vec::new(),
+            level: 0,
+            pending: false,
+            triangles: 0,
+            draw_calls: chosen.len() as u64,
+            center: p.center,
+            radius: p.radius,
+            covers: p.covers,
+            impostor: Some(Impostor {
+                min: imp.map_or([0.0; 3], |i| i.min),
+                max: imp.map_or([0.0; 3], |i| i.max),
+                views: chosen
+                    .iter()
+                    .map(|v| ImpostorView {
+                        direction: v.direction,
+                        width: v.width,
+                        height: v.height,
+                        pixel: v.pixel,
+                        color: v.color.clone(),
+                        depth: v.depth.clone(),
+                        normal: v.normal.clone(),
+                    })
+                    .collect(),
+            }),
         }
     }
 
     /// A planned entry as the wire carries it.
     pub fn entry(&self, p: &Planned) -> Entry {
+        if let Drawn::Impostor = p.what {
+            return self.impostor_entry(p);
+        }
         let mut level = 0;
         let mut preview = None;
         let (kind, asset, bytes, triangles, draw_calls, matrix, role) = match &p.what {
@@ -1111,15 +1334,16 @@ impl Plan {
                     AssetRole::Model,
                 )
             }
+            Drawn::Impostor => unreachable!("impostors are made by impostor_entry"),
             Drawn::Aggregate => {
                 let a = self.aggregate(p);
                 let cost = a.map(NodeAsset::of);
                 (
                     EntryKind::Aggregate,
                     a.map_or(String::new(), |a| a.glb.clone()),
-                    cost.map_or(0, |c| c.bytes),
-                    cost.map_or(0, |c| c.triangles),
-                    cost.map_or(1, |c| c.draw_calls),
+                    cost.as_ref().map_or(0, |c| c.bytes),
+                    cost.as_ref().map_or(0, |c| c.triangles),
+                    cost.as_ref().map_or(1, |c| c.draw_calls),
                     matrix_of(&Affine3A::IDENTITY),
                     AssetRole::Mesh,
                 )
@@ -1144,6 +1368,7 @@ impl Plan {
             center: p.center,
             radius: p.radius,
             covers: p.covers,
+            impostor: None,
         }
     }
 

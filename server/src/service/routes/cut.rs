@@ -25,6 +25,8 @@ pub struct CutParams {
     /// The most geometric error an object's level of detail may show, pixels. Default 1; 0
     /// sends every object at full detail.
     pub max_pixel_error: Option<f64>,
+    /// Whether the client draws impostors. Default true.
+    pub impostors: Option<bool>,
     /// The most entries (default 4,000).
     pub max_entries: Option<u64>,
     /// The most asset bytes.
@@ -53,6 +55,7 @@ impl CutParams {
             min_solid_angle: self.min_solid_angle.unwrap_or(DEFAULT_MIN_SOLID_ANGLE),
             pixel_solid_angle: self.pixel_solid_angle.unwrap_or(DEFAULT_PIXEL_SOLID_ANGLE),
             max_pixel_error: self.max_pixel_error.unwrap_or(DEFAULT_MAX_PIXEL_ERROR),
+            impostors: self.impostors.unwrap_or(true),
             budgets: Budgets {
                 max_entries: self.max_entries,
                 max_bytes: self.max_bytes,
