@@ -441,7 +441,9 @@ fn impostor_views(
     let sphere = n.outer_sphere();
     let towards = sphere.centre - eye;
     let nearest = towards.length() - sphere.radius;
-    if !(nearest * pixel_angle >= imp.pixel) {
+    // Within the handover (or a NaN from a degenerate view): the aggregate.
+    let within = (nearest * pixel_angle).partial_cmp(&imp.pixel) != Some(Ordering::Less);
+    if !within {
         return 0;
     }
     horizon_impostor::facing(&imp.directions, towards)
