@@ -442,8 +442,11 @@ fn impostor_views(
     let towards = sphere.centre - eye;
     let nearest = towards.length() - sphere.radius;
     // Within the handover (or a NaN from a degenerate view): the aggregate.
-    let within = (nearest * pixel_angle).partial_cmp(&imp.pixel) != Some(Ordering::Less);
-    if !within {
+    let beyond = matches!(
+        (nearest * pixel_angle).partial_cmp(&imp.pixel),
+        Some(Ordering::Greater | Ordering::Equal)
+    );
+    if !beyond {
         return 0;
     }
     horizon_impostor::facing(&imp.directions, towards)
