@@ -26,4 +26,4 @@ pub use orthoview::{
     VIEWS_SERVED, WORLD_DIRECTIONS, WORLD_THETA,
 };
 pub use scene::{PreparedMesh, Scene, SceneBuilder, Surface};
-pub use shade::to_srgb;
+pub use shade::{from_srgb, to_srgb};

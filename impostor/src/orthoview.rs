@@ -86,6 +86,10 @@ pub const WORLD_THETA: f32 = 0.8094;
 /// figure 5: two leave disocclusions, a third largely removes them.
 pub const VIEWS_SERVED: usize = 3;
 
+/// A splat's side in orthoview pixels ([`Orthoview::splats`]): over 1 so that splats seen up
+/// to [`WORLD_THETA`] from their direction still close up (1 / cos(46.4 degrees) = 1.45).
+pub const SPLAT_SCALE: f32 = 1.5;
+
 /// Pixels of depth within which composited pixels are averaged together.
 pub const DEPTH_THRESHOLD: f32 = 1.5;
 
@@ -371,6 +375,58 @@ impl Orthoview {
             }
         }
         out
+    }
+
+    /// The orthoview as geometry: one square per covered pixel, at its sample's depth,
+    /// perpendicular to the direction, [`SPLAT_SCALE`] pixels across, with the pixel's colour
+    /// (vertex colours, linear) and normal, double-sided. This is the depth-displaced splat a
+    /// client draws; rendered with the meshes, it is lit by its normals as they are.
+    pub fn splats(&self) -> horizon_mesh::InstancedMesh {
+        use glam::Vec4;
+        let f = Frame::new(&self.bounds, self.direction, self.width.max(self.height));
+        let half = 0.5 * SPLAT_SCALE * f.pixel;
+        let (du, dv) = (f.u * half, f.v * half);
+        let mut sub = horizon_mesh::Submesh {
+            normals: Some(Vec::new()),
+            colors: Some(Vec::new()),
+            material: Some(0),
+            ..horizon_mesh::Submesh::default()
+        };
+        for y in 0..self.height {
+            for x in 0..self.width {
+                let Some(p) = self.point(x, y) else {
+                    continue;
+                };
+                let i = (y * self.width + x) as usize;
+                let [r, g, b, _] = self.color[i];
+                let linear = |c: u8| crate::shade::from_srgb(c);
+                let color = Vec4::new(linear(r), linear(g), linear(b), 1.0);
+                let normal = from_octahedral(self.normal[i]);
+                let base = sub.positions.len() as u32;
+                sub.positions
+                    .extend([p - du - dv, p + du - dv, p + du + dv, p - du + dv]);
+                if let Some(n) = sub.normals.as_mut() {
+                    n.extend([normal; 4]);
+                }
+                if let Some(c) = sub.colors.as_mut() {
+                    c.extend([color; 4]);
+                }
+                sub.indices
+                    .extend([base, base + 1, base + 2, base, base + 2, base + 3]);
+            }
+        }
+        horizon_mesh::InstancedMesh {
+            submeshes: vec![sub],
+            instances: vec![horizon_mesh::Instance {
+                submesh: 0,
+                transform: glam::Affine3A::IDENTITY,
+            }],
+            materials: vec![horizon_mesh::Material {
+                double_sided: true,
+                ..horizon_mesh::Material::default()
+            }],
+            textures: Vec::new(),
+        }
     }
 
     /// The world position of pixel (`x`, `y`)'s sample, if it holds one.

@@ -214,6 +214,11 @@ fn encode(c: Vec4) -> [u8; 4] {
     [r, g, b, (c.w.clamp(0.0, 1.0) * 255.0).round() as u8]
 }
 
+/// An sRGB byte to linear light.
+pub fn from_srgb(c: u8) -> f32 {
+    srgb_table()[c as usize]
+}
+
 /// Linear colour to sRGB bytes.
 pub fn to_srgb(c: Vec3) -> [u8; 3] {
     c.to_array().map(|v| {

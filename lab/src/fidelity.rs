@@ -65,6 +65,11 @@ pub struct Args {
     /// at level 0), the peer the levels are compared with in the same run.
     #[arg(long)]
     pub levels_peer: bool,
+    /// Plan cuts with orthoview impostors (drawn as splats, `Orthoview::splats`), and also
+    /// plan, render and measure each view's cut without them, the peer they are compared
+    /// with in the same run.
+    #[arg(long)]
+    pub impostors: bool,
     /// Instead of seeded views: render node N's aggregate alone against the objects it covers
     /// alone, from above at 45 degrees and at the node's nearest display distance (times
     /// `--node-distance`).
@@ -117,6 +122,10 @@ pub struct ViewReport {
     pub render_seconds: f64,
     /// The same cut without levels of detail, with `--levels-peer`.
     pub flat: Option<FlatReport>,
+    /// The same cut without impostors, with `--impostors`.
+    pub meshes_only: Option<FlatReport>,
+    /// Impostor entries of the cut.
+    pub impostors: usize,
     /// Object entries drawn at a level above 0.
     pub levelled: usize,
 }
@@ -235,8 +244,7 @@ pub fn measure(args: &Args) -> anyhow::Result<Report> {
         let mut view = View::at(camera.eye.to_array().map(f64::from));
         view.min_solid_angle = args.min_solid_angle;
         view.max_pixel_error = args.max_pixel_error;
-        // The ray caster draws meshes: cuts of meshes alone.
-        view.impostors = false;
+        view.impostors = args.impostors;
         // The rendered image's own pixel, so that levels of detail are chosen for it.
         view.pixel_solid_angle = f64::from(args.fov.to_radians() / args.height as f32).powi(2);
         view.budgets = Budgets {
@@ -256,6 +264,17 @@ pub fn measure(args: &Args) -> anyhow::Result<Report> {
         } else {
             None
         };
+        let meshes_only = if args.impostors {
+            let mesh_view = View {
+                impostors: false,
+                ..view
+            };
+            let entries = world.with_served(|s| plan(s, &table, &mesh_view).entries())?;
+            let frame = assets.scene(&entries)?.render(&camera, args.samples);
+            Some((entries, frame))
+        } else {
+            None
+        };
         let cut_scene = assets.scene(&cut_entries)?;
         let started = Instant::now();
         let full = full_scene.render(&camera, args.samples);
@@ -267,7 +286,7 @@ pub fn measure(args: &Args) -> anyhow::Result<Report> {
             off16,
             holes,
         } = compare(&full, &cut);
-        let flat = flat.map(|(entries, frame)| {
+        let peer = |(entries, frame): (Vec<Entry>, horizon_impostor::Frame)| {
             let c = compare(&full, &frame);
             FlatReport {
                 psnr: c.psnr,
@@ -275,7 +294,9 @@ pub fn measure(args: &Args) -> anyhow::Result<Report> {
                 holes: c.holes,
                 cost: cost(&entries),
             }
-        });
+        };
+        let flat = flat.map(peer);
+        let meshes_only = meshes_only.map(peer);
         if let Some(dir) = &args.images {
             std::fs::create_dir_all(dir)?;
             full.save_png(&dir.join(format!("{name}-full.png")))?;
@@ -306,6 +327,11 @@ pub fn measure(args: &Args) -> anyhow::Result<Report> {
             largest: largest(&cut_entries),
             render_seconds,
             flat,
+            meshes_only,
+            impostors: cut_entries
+                .iter()
+                .filter(|e| e.kind == EntryKind::Impostor)
+                .count(),
             levelled: cut_entries.iter().filter(|e| e.level > 0).count(),
         };
         eprintln!(
@@ -445,6 +471,8 @@ fn focus(
             largest: largest(&drawn),
             render_seconds,
             flat: None,
+            meshes_only: None,
+            impostors: 0,
             levelled: drawn.iter().filter(|e| e.level > 0).count(),
         }],
     })
@@ -567,6 +595,11 @@ impl<'w> Assets<'w> {
         let mut builder = SceneBuilder::default();
         let mut numbers: HashMap<String, usize> = HashMap::new();
         for e in entries {
+            if let Some(imp) = &e.impostor {
+                for v in &imp.views {
+                    builder.add(&self.splats(imp, v)?, &Affine3A::IDENTITY);
+                }
+            }
             for p in &e.placements {
                 let number = match numbers.get(&p.asset) {
                     Some(&n) => n,
@@ -580,6 +613,39 @@ impl<'w> Assets<'w> {
             }
         }
         Ok(builder.build())
+    }
+
+    /// An impostor view's splats, ready to ray-cast (kept by its colour image's hash).
+    fn splats(
+        &mut self,
+        imp: &horizon_protocol::Impostor,
+        v: &horizon_protocol::ImpostorView,
+    ) -> anyhow::Result<Arc<PreparedMesh>> {
+        let key = format!("splats:{}:{}", v.color, v.depth);
+        if let Some(p) = self.prepared.get(&key) {
+            return Ok(p.0.clone());
+        }
+        let mut images = Vec::with_capacity(3);
+        for hash in [&v.color, &v.depth, &v.normal] {
+            images.push(
+                self.world
+                    .blob(hash)?
+                    .with_context(|| format!("orthoview image {hash} is not stored"))?,
+            );
+        }
+        let images: [Vec<u8>; 3] = images
+            .try_into()
+            .map_err(|_| anyhow::anyhow!("three images"))?;
+        let bounds = horizon_mesh::Aabb {
+            min: Vec3::from(imp.min),
+            max: Vec3::from(imp.max),
+        };
+        let view = horizon_impostor::Orthoview::decode(&bounds, v.direction, &images)
+            .map_err(|e| anyhow::anyhow!("orthoview {}: {e}", v.color))?;
+        let mesh = view.splats();
+        let made = (Arc::new(PreparedMesh::new(&mesh)), mesh.bounds());
+        self.prepared.insert(key, made.clone());
+        Ok(made.0)
     }
 
     /// Every object's exact world box, by world object id (from the full world's entries).
@@ -758,6 +824,32 @@ fn print_table(r: &Report) -> anyhow::Result<()> {
                 v.cut.triangles,
                 ratio(v.cut.triangles, f.cost.triangles),
                 v.levelled,
+                v.entries
+            )?;
+        }
+    }
+    if r.views.iter().any(|v| v.meshes_only.is_some()) {
+        outln!()?;
+        outln!("Orthoview impostors (splats) against the same cut without them, both against the full world:")?;
+        outln!()?;
+        outln!("| view | download without / with impostors | PSNR dB without / with | SSIM without / with | holes without / with | impostor entries |")?;
+        outln!("|---|---|---|---|---|---|")?;
+        for v in &r.views {
+            let Some(f) = &v.meshes_only else { continue };
+            outln!(
+                "| {} | {} / {} ({:.3}x) | {:.1} / {:.1} ({:+.2}) | {:.4} / {:.4} | {:.3}% / {:.3}% | {} of {} |",
+                v.name,
+                mb(f.cost.bytes),
+                mb(v.cut.bytes),
+                ratio(v.cut.bytes, f.cost.bytes),
+                f.psnr,
+                v.psnr,
+                v.psnr - f.psnr,
+                f.ssim,
+                v.ssim,
+                f.holes * 100.0,
+                v.holes * 100.0,
+                v.impostors,
                 v.entries
             )?;
         }
