@@ -362,8 +362,10 @@ impl Orthoview {
                     normal += from_octahedral(b.2);
                 }
                 let i = (y * f.width + x) as usize;
-                // Coverage: the share of the block's four samples that hold something.
-                let alpha = (255.0 * block.len() as f32 / 4.0).round() as u8;
+                // Coverage: the mean of the block's four samples' coverage (0 where empty),
+                // so that partial coverage carries up the tree.
+                let covered: f32 = block.iter().map(|b| f32::from(b.1[3])).sum();
+                let alpha = (covered / 4.0).round() as u8;
                 out.color[i] = [
                     color[0].round() as u8,
                     color[1].round() as u8,
@@ -378,14 +380,13 @@ impl Orthoview {
     }
 
     /// The orthoview as geometry: one square per covered pixel, at its sample's depth,
-    /// perpendicular to the direction, [`SPLAT_SCALE`] pixels across, with the pixel's colour
+    /// perpendicular to the direction, [`SPLAT_SCALE`] pixels across times the square root of
+    /// its coverage (alpha), with the pixel's colour
     /// (vertex colours, linear) and normal, double-sided. This is the depth-displaced splat a
     /// client draws; rendered with the meshes, it is lit by its normals as they are.
     pub fn splats(&self) -> horizon_mesh::InstancedMesh {
         use glam::Vec4;
         let f = Frame::new(&self.bounds, self.direction, self.width.max(self.height));
-        let half = 0.5 * SPLAT_SCALE * f.pixel;
-        let (du, dv) = (f.u * half, f.v * half);
         let mut sub = horizon_mesh::Submesh {
             normals: Some(Vec::new()),
             colors: Some(Vec::new()),
@@ -398,7 +399,10 @@ impl Orthoview {
                     continue;
                 };
                 let i = (y * self.width + x) as usize;
-                let [r, g, b, _] = self.color[i];
+                let [r, g, b, a] = self.color[i];
+                // A pixel partly covered is a smaller square of the same area.
+                let half = 0.5 * SPLAT_SCALE * f.pixel * (f32::from(a) / 255.0).sqrt();
+                let (du, dv) = (f.u * half, f.v * half);
                 let linear = |c: u8| crate::shade::from_srgb(c);
                 let color = Vec4::new(linear(r), linear(g), linear(b), 1.0);
                 let normal = from_octahedral(self.normal[i]);

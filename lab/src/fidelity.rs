@@ -67,7 +67,8 @@ pub struct Args {
     pub levels_peer: bool,
     /// Plan cuts with orthoview impostors (drawn as splats, `Orthoview::splats`), and also
     /// plan, render and measure each view's cut without them, the peer they are compared
-    /// with in the same run.
+    /// with in the same run. With `--node`: the node's impostor against its aggregate, each
+    /// alone, at the impostor's handover distance for this image's pixel.
     #[arg(long)]
     pub impostors: bool,
     /// Instead of seeded views: render node N's aggregate alone against the objects it covers
@@ -126,6 +127,11 @@ pub struct ViewReport {
     pub meshes_only: Option<FlatReport>,
     /// Impostor entries of the cut.
     pub impostors: usize,
+    /// With `--node` and `--impostors`: PSNR of the node's impostor against its aggregate.
+    pub against_aggregate: Option<f64>,
+    /// What the cut's object entries alone cost: the floor of any change to how nodes are
+    /// drawn (objects that subtend `min_solid_angle` are always sent as themselves).
+    pub objects_alone: Cost,
     /// Object entries drawn at a level above 0.
     pub levelled: usize,
 }
@@ -332,6 +338,14 @@ pub fn measure(args: &Args) -> anyhow::Result<Report> {
                 .iter()
                 .filter(|e| e.kind == EntryKind::Impostor)
                 .count(),
+            against_aggregate: None,
+            objects_alone: cost(
+                &cut_entries
+                    .iter()
+                    .filter(|e| e.kind == EntryKind::Object)
+                    .cloned()
+                    .collect::<Vec<_>>(),
+            ),
             levelled: cut_entries.iter().filter(|e| e.level > 0).count(),
         };
         eprintln!(
@@ -402,12 +416,28 @@ fn focus(
         r_max,
         &manifest.options,
     );
-    let distance = (display.radius + display.distance) as f32;
+    let mut distance = (display.radius + display.distance) as f32;
+    // With `--impostors`: the node's impostor at its handover distance for this image's
+    // pixel, against its aggregate there.
+    let impostor = if args.impostors {
+        let imp = manifest
+            .impostors
+            .get(&node)
+            .with_context(|| format!("node {node} has no impostor"))?;
+        let pixel_angle = args.fov.to_radians() / args.height as f32;
+        let outer =
+            world.with_served(|s| s.tree.bvh.node(NodeId(node)).map(|n| n.outer_sphere()))?;
+        let outer = outer.with_context(|| format!("node {node} is not in the tree"))?;
+        distance = imp.pixel() / pixel_angle + outer.radius + (outer.centre - centre).length();
+        Some(imp.clone())
+    } else {
+        None
+    };
     let distance = distance * args.node_distance;
     let eye = centre + Vec3::new(0.0, distance, distance) * std::f32::consts::FRAC_1_SQRT_2;
     let camera = Camera::look_at(eye, centre, args.width, args.height, args.fov);
     let (hash, bytes) = (aggregate.glb.clone(), aggregate.stats.bytes as u64);
-    let drawn = vec![Entry {
+    let mut drawn = vec![Entry {
         id: format!("n:{node}@{hash}"),
         kind: EntryKind::Aggregate,
         assets: vec![horizon_protocol::Asset {
@@ -429,9 +459,68 @@ fn focus(
         impostor: None,
         covers: objects.len() as u64,
     }];
+    let mut aggregate_entries = None;
+    if let Some(imp) = &impostor {
+        // The impostor's facing views are drawn; the aggregate is measured beside it.
+        aggregate_entries = Some(std::mem::take(&mut drawn));
+        let directions: Vec<[i8; 3]> = imp.views.iter().map(|v| v.direction).collect();
+        let views = horizon_impostor::facing(&directions, centre - eye)
+            .into_iter()
+            .map(|i| {
+                let v = &imp.views[i];
+                horizon_protocol::ImpostorView {
+                    direction: v.direction,
+                    width: v.width,
+                    height: v.height,
+                    pixel: v.pixel,
+                    color: v.color.clone(),
+                    depth: v.depth.clone(),
+                    normal: v.normal.clone(),
+                }
+            })
+            .collect();
+        drawn = vec![Entry {
+            id: format!("n:{node}@{}", imp.key),
+            kind: EntryKind::Impostor,
+            assets: Vec::new(),
+            placements: Vec::new(),
+            level: 0,
+            pending: false,
+            bytes: imp.bytes(),
+            triangles: 0,
+            draw_calls: 0,
+            center: centre.to_array(),
+            radius: 0.0,
+            impostor: Some(horizon_protocol::Impostor {
+                min: imp.min,
+                max: imp.max,
+                views,
+            }),
+            covers: objects.len() as u64,
+        }];
+    }
     let started = Instant::now();
     let reference = assets.scene(&objects)?.render(&camera, args.samples);
     let test = assets.scene(&drawn)?.render(&camera, args.samples);
+    let mut against_aggregate = None;
+    let meshes_only = match &aggregate_entries {
+        Some(entries) => {
+            let frame = assets.scene(entries)?.render(&camera, args.samples);
+            against_aggregate = Some(compare(&frame, &test).psnr);
+            if let Some(dir) = &args.images {
+                std::fs::create_dir_all(dir)?;
+                frame.save_png(&dir.join(format!("node-{node}-aggregate.png")))?;
+            }
+            let c = compare(&reference, &frame);
+            Some(FlatReport {
+                psnr: c.psnr,
+                ssim: c.ssim,
+                holes: c.holes,
+                cost: cost(entries),
+            })
+        }
+        None => None,
+    };
     let render_seconds = started.elapsed().as_secs_f64();
     let c = compare(&reference, &test);
     let name = format!("node-{node}");
@@ -471,8 +560,10 @@ fn focus(
             largest: largest(&drawn),
             render_seconds,
             flat: None,
-            meshes_only: None,
-            impostors: 0,
+            meshes_only,
+            impostors: usize::from(impostor.is_some()),
+            against_aggregate,
+            objects_alone: Cost::default(),
             levelled: drawn.iter().filter(|e| e.level > 0).count(),
         }],
     })
@@ -832,16 +923,18 @@ fn print_table(r: &Report) -> anyhow::Result<()> {
         outln!()?;
         outln!("Orthoview impostors (splats) against the same cut without them, both against the full world:")?;
         outln!()?;
-        outln!("| view | download without / with impostors | PSNR dB without / with | SSIM without / with | holes without / with | impostor entries |")?;
-        outln!("|---|---|---|---|---|---|")?;
+        outln!("| view | download without / with impostors | objects alone (the floor) | PSNR dB without / with | SSIM without / with | holes without / with | impostor entries |")?;
+        outln!("|---|---|---|---|---|---|---|")?;
         for v in &r.views {
             let Some(f) = &v.meshes_only else { continue };
             outln!(
-                "| {} | {} / {} ({:.3}x) | {:.1} / {:.1} ({:+.2}) | {:.4} / {:.4} | {:.3}% / {:.3}% | {} of {} |",
+                "| {} | {} / {} ({:.3}x) | {} ({:.3}x) | {:.1} / {:.1} ({:+.2}) | {:.4} / {:.4} | {:.3}% / {:.3}% | {} of {} |",
                 v.name,
                 mb(f.cost.bytes),
                 mb(v.cut.bytes),
                 ratio(v.cut.bytes, f.cost.bytes),
+                mb(v.objects_alone.bytes),
+                ratio(v.objects_alone.bytes, f.cost.bytes),
                 f.psnr,
                 v.psnr,
                 v.psnr - f.psnr,
@@ -851,6 +944,18 @@ fn print_table(r: &Report) -> anyhow::Result<()> {
                 v.holes * 100.0,
                 v.impostors,
                 v.entries
+            )?;
+        }
+        for v in &r.views {
+            let (Some(a), Some(f)) = (v.against_aggregate, &v.meshes_only) else {
+                continue;
+            };
+            outln!()?;
+            outln!(
+                "{}: at its handover distance, alone: impostor against aggregate PSNR {a:.1} dB; against the objects, impostor {:.1} dB, aggregate {:.1} dB",
+                v.name,
+                v.psnr,
+                f.psnr
             )?;
         }
     }
