@@ -90,6 +90,13 @@ pub const VIEWS_SERVED: usize = 3;
 /// to [`WORLD_THETA`] from their direction still close up (1 / cos(46.4 degrees) = 1.45).
 pub const SPLAT_SCALE: f32 = 1.5;
 
+/// A splat's side in pixels for a pixel covered `alpha` (0..=1): of the pixel's covered area,
+/// grown towards [`SPLAT_SCALE`] as the pixel fills, so that full pixels overlap their
+/// neighbours (no cracks seen obliquely) and thin features keep their area.
+pub fn splat_side(alpha: f32) -> f32 {
+    alpha.sqrt() * (1.0 + (SPLAT_SCALE - 1.0) * alpha * alpha)
+}
+
 /// Pixels of depth within which composited pixels are averaged together.
 pub const DEPTH_THRESHOLD: f32 = 1.5;
 
@@ -380,8 +387,8 @@ impl Orthoview {
     }
 
     /// The orthoview as geometry: one square per covered pixel, at its sample's depth,
-    /// perpendicular to the direction, [`SPLAT_SCALE`] pixels across times the square root of
-    /// its coverage (alpha), with the pixel's colour
+    /// perpendicular to the direction, [`splat_side`] pixels across for its coverage (alpha),
+    /// with the pixel's colour
     /// (vertex colours, linear) and normal, double-sided. This is the depth-displaced splat a
     /// client draws; rendered with the meshes, it is lit by its normals as they are.
     pub fn splats(&self) -> horizon_mesh::InstancedMesh {
@@ -401,7 +408,7 @@ impl Orthoview {
                 let i = (y * self.width + x) as usize;
                 let [r, g, b, a] = self.color[i];
                 // A pixel partly covered is a smaller square of the same area.
-                let half = 0.5 * SPLAT_SCALE * f.pixel * (f32::from(a) / 255.0).sqrt();
+                let half = 0.5 * splat_side(f32::from(a) / 255.0) * f.pixel;
                 let (du, dv) = (f.u * half, f.v * half);
                 let linear = |c: u8| crate::shade::from_srgb(c);
                 let color = Vec4::new(linear(r), linear(g), linear(b), 1.0);
@@ -415,8 +422,9 @@ impl Orthoview {
                 if let Some(c) = sub.colors.as_mut() {
                     c.extend([color; 4]);
                 }
+                // Facing against the direction, towards a viewer looking along it.
                 sub.indices
-                    .extend([base, base + 1, base + 2, base, base + 2, base + 3]);
+                    .extend([base, base + 2, base + 1, base, base + 3, base + 2]);
             }
         }
         horizon_mesh::InstancedMesh {

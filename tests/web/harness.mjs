@@ -119,6 +119,7 @@ export async function cutIds(page, base) {
     min_solid_angle: String(v.min_solid_angle),
     pixel_solid_angle: String(v.pixel_solid_angle),
     max_pixel_error: String(v.max_pixel_error),
+    impostors: String(v.impostors),
     max_entries: String(v.budgets.max_entries),
   });
   const response = await fetch(`${base}/v1/cut?${q}`);

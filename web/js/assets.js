@@ -2,13 +2,19 @@
 // concurrent requests, the most visible first; a request nobody wants any more is cancelled;
 // what has loaded stays in an LRU cache under a memory budget while nothing draws it.
 //
-// An asset is a GLB. Loaded, it is a list of parts: a geometry, a material and the part's
-// matrices inside the asset (several when the GLB instances it), ready to be instanced at any
-// placement.
+// An asset is a GLB, or an impostor's orthoview (three images, `impostor.js`). Loaded, it is a
+// list of parts: a geometry, a material and the part's matrices inside the asset (several when
+// the GLB instances it), ready to be instanced at any placement.
 
 import * as THREE from 'three';
 import { GLTFLoader } from 'three/addons/loaders/GLTFLoader.js';
 import { MeshoptDecoder } from 'three/addons/libs/meshopt_decoder.module.js';
+import { loadView } from './impostor.js';
+
+/** The key an impostor's orthoview is kept under. */
+export function viewKey(view) {
+  return `orthoview:${view.color}`;
+}
 
 export class AssetStore {
   /**
@@ -36,11 +42,16 @@ export class AssetStore {
    * Asks for `hash` on behalf of `user` (an object with `center` and `radius`, used to rank the
    * request). Resolves with the loaded asset; rejects if it fails or is cancelled.
    */
-  want(hash, user, { first = false } = {}) {
+  want(hash, user, { first = false, view = null, box = null } = {}) {
     let r = this.records.get(hash);
     if (!r) {
       r = new AssetRecord(hash);
       this.records.set(hash, r);
+    }
+    // An orthoview (asked for by `viewKey`) is built from its images and its impostor's box.
+    if (view) {
+      r.view = view;
+      r.box = box;
     }
     r.users.add(user);
     if (first) r.first = true;
@@ -123,6 +134,16 @@ export class AssetStore {
     r.controller = new AbortController();
     this.active++;
     try {
+      if (r.view) {
+        const { parts, received } = await loadView(r.box, r.view, r.controller.signal);
+        this.bytesReceived += received;
+        if (r.state !== 'loading') {
+          disposeParts(parts);
+          return;
+        }
+        this.finish(r, parts);
+        return;
+      }
       const response = await fetch(`/assets/${r.hash}`, { signal: r.controller.signal });
       if (!response.ok) throw new Error(`asset ${r.hash}: HTTP ${response.status}`);
       const buffer = await response.arrayBuffer();
@@ -133,12 +154,7 @@ export class AssetStore {
         disposeParts(partsOf(gltf.scene));
         return;
       }
-      r.parts = partsOf(gltf.scene);
-      r.bytes = memoryOf(r.parts);
-      r.state = 'ready';
-      this.heldBytes += r.bytes;
-      this.peakHeldBytes = Math.max(this.peakHeldBytes, this.heldBytes);
-      r.resolve(r);
+      this.finish(r, partsOf(gltf.scene));
     } catch (error) {
       if (r.state === 'loading') {
         r.state = 'failed';
@@ -149,6 +165,16 @@ export class AssetStore {
       this.evict();
       this.pump();
     }
+  }
+
+  /** `r` has loaded as `parts`. */
+  finish(r, parts) {
+    r.parts = parts;
+    r.bytes = memoryOf(r.parts);
+    r.state = 'ready';
+    this.heldBytes += r.bytes;
+    this.peakHeldBytes = Math.max(this.peakHeldBytes, this.heldBytes);
+    r.resolve(r);
   }
 
   /** Frees the least recently used assets nothing draws until the cache is under budget. */
@@ -174,6 +200,8 @@ class AssetRecord {
     this.bytes = 0;
     this.lastUsed = 0;
     this.controller = null;
+    this.view = null;
+    this.box = null;
     this.reset();
   }
 
@@ -253,6 +281,7 @@ function disposeParts(parts) {
   if (!parts) return;
   for (const p of parts) {
     p.geometry.dispose();
+    if (p.shared) continue;
     for (const t of texturesOf(p.material)) t.dispose();
     (Array.isArray(p.material) ? p.material : [p.material]).forEach((m) => m.dispose());
   }

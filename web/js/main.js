@@ -3,8 +3,10 @@
 //
 // Query parameters: `min_solid_angle` (default 0.001 sr), `max_entries` (default 4000),
 // `max_pixel_error` (default 1: the geometric error, in pixels, an object's level of detail may
-// show; 0 draws every object at full detail), `cache_mb` (default 768), `antialias=0` (cheaper in software rendering), and `full`: draw every object as its model instead of the cut
-// (the reference the fidelity test compares with).
+// show; 0 draws every object at full detail), `impostors=0` (no orthoview impostors: far nodes
+// as their aggregates), `cache_mb` (default 768), `antialias=0` (cheaper in software
+// rendering), and `full`: draw every object as its model instead of the cut (the reference the
+// fidelity test compares with).
 //
 // `window.horizon` is the surface tests and tools read (DESIGN.md, "Outputs that tools parse").
 
@@ -20,8 +22,7 @@ const params = new URLSearchParams(location.search);
 const MIN_SOLID_ANGLE = Number(params.get('min_solid_angle') || 0.001);
 const MAX_ENTRIES = Number(params.get('max_entries') || 4000);
 const MAX_PIXEL_ERROR = params.has('max_pixel_error') ? Number(params.get('max_pixel_error')) : 1;
-// The viewer does not draw orthoview impostors yet: it asks for meshes everywhere.
-const IMPOSTORS = false;
+const IMPOSTORS = params.get('impostors') !== '0';
 const CACHE_MB = Number(params.get('cache_mb') || 768);
 const FULL = params.has('full');
 const ANTIALIAS = params.get('antialias') !== '0';
@@ -105,6 +106,8 @@ const stats = { frames: 0, incompleteFrames: 0, firstCompleteMs: null, drawCalls
 window.horizon = {
   get complete() { return world.complete; },
   get entries() { return world.current.size; },
+  /** Entries of the current cut drawn as orthoview impostors. */
+  get impostors() { return world.impostorsShown; },
   get generation() { return world.generation; },
   get published() { return world.published; },
   get objects() { return world.objects; },

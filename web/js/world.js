@@ -16,6 +16,7 @@
 // mirroring parent, so that three.js turns the winding round.
 
 import * as THREE from 'three';
+import { viewKey } from './assets.js';
 
 export const FADE_MS = 250;
 
@@ -120,6 +121,9 @@ export class World {
     this.entries.set(e.id, e);
     this.current.add(e.id);
     const hashes = [...new Set(data.assets.filter((a) => a.role !== 'orthoview' && a.role !== 'preview').map((a) => a.hash))];
+    // An impostor's assets are its views, each loaded from its three images.
+    const views = data.impostor ? data.impostor.views : [];
+    for (const view of views) hashes.push(viewKey(view));
     e.waiting = hashes.length;
     e.hashes = hashes;
     // Progressive loading: an object whose own level is not loaded yet is first drawn with its
@@ -140,8 +144,11 @@ export class World {
         () => {},
       );
     }
+    const viewOf = new Map(views.map((view) => [viewKey(view), view]));
     for (const hash of hashes) {
-      this.assets.want(hash, e).then(
+      const view = viewOf.get(hash);
+      const options = view ? { view, box: data.impostor } : {};
+      this.assets.want(hash, e, options).then(
         (record) => {
           if (!this.entries.has(e.id) || this.entries.get(e.id) !== e) return;
           e.loaded.set(hash, record);
@@ -370,6 +377,16 @@ export class World {
       }
     }
     return covers === this.objects ? null : `covers add up to ${covers}, not ${this.objects}`;
+  }
+
+  /** Entries of the current cut shown as impostors. */
+  get impostorsShown() {
+    let n = 0;
+    for (const id of this.current) {
+      const e = this.entries.get(id);
+      if (e.data.kind === 'impostor' && e.state === 'shown') n++;
+    }
+    return n;
   }
 
   /** Entries retiring or fading: the view is changing over. */
