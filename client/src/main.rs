@@ -146,6 +146,9 @@ struct ViewArgs {
     /// Most geometric error an object's level of detail may show, pixels (0: full detail).
     #[arg(long)]
     max_pixel_error: Option<f64>,
+    /// Ask for no orthoview impostors (far nodes as their aggregates).
+    #[arg(long)]
+    no_impostors: bool,
     /// Most entries.
     #[arg(long)]
     max_entries: Option<u64>,
@@ -176,6 +179,7 @@ impl ViewArgs {
         if let Some(e) = self.max_pixel_error {
             view.max_pixel_error = e;
         }
+        view.impostors = !self.no_impostors;
         view.budgets = Budgets {
             max_entries: self.max_entries,
             max_bytes: self.max_bytes,
@@ -479,8 +483,14 @@ async fn walk_command(
         report.entries_removed
     ))?;
     out(&format!(
-        "assets: {} fetched ({} bytes), {} from the cache, {} gone",
-        report.assets_fetched, report.bytes_fetched, report.assets_cached, report.assets_gone
+        "assets: {} fetched ({} bytes: {} for objects, {} for aggregates, {} for impostors), {} from the cache, {} gone",
+        report.assets_fetched,
+        report.bytes_fetched,
+        report.bytes_objects,
+        report.bytes_aggregates,
+        report.bytes_impostors,
+        report.assets_cached,
+        report.assets_gone
     ))?;
     out(&format!(
         "view loaded: p50 {:.0} ms, p99 {:.0} ms, max {:.0} ms over {} answered views \

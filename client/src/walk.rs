@@ -6,7 +6,7 @@
 //! every asset of the cut that answered it was loaded, and the share of frames in which an
 //! entry of the cut had an asset still missing.
 
-use std::collections::{BTreeMap, HashSet, VecDeque};
+use std::collections::{BTreeMap, HashMap, HashSet, VecDeque};
 use std::time::{Duration, Instant};
 
 use futures_util::stream::FuturesUnordered;
@@ -157,6 +157,12 @@ pub struct WalkReport {
     pub assets_gone: u64,
     /// Body bytes downloaded.
     pub bytes_fetched: u64,
+    /// Of them, for object entries (the geometry near the viewer).
+    pub bytes_objects: u64,
+    /// For aggregate entries.
+    pub bytes_aggregates: u64,
+    /// For impostor entries (orthoview images).
+    pub bytes_impostors: u64,
     /// Views a message answered (named in its `view`) whose cut was loaded whole before the
     /// walk ended: the samples of `view_latency_ms`.
     pub views_loaded: u64,
@@ -363,6 +369,8 @@ struct Walker {
     queued: HashSet<String>,
     /// Every asset the cut needs.
     needed: HashSet<String>,
+    /// The kind of entry that first asked for each asset queued, for the report's split.
+    kinds: HashMap<String, horizon_protocol::EntryKind>,
     /// How many of them are not loaded.
     missing: usize,
     /// Views sent and not answered yet: id -> when sent.
@@ -386,6 +394,7 @@ impl Walker {
             queue: VecDeque::new(),
             queued: HashSet::new(),
             needed: HashSet::new(),
+            kinds: HashMap::new(),
             missing: 0,
             sent: BTreeMap::new(),
             awaiting: Vec::new(),
@@ -452,6 +461,7 @@ impl Walker {
                     && self.queued.insert(h.clone())
                 {
                     self.queue.push_back(h.clone());
+                    self.kinds.entry(h.clone()).or_insert(entry.kind);
                 }
             }
         }
@@ -485,6 +495,14 @@ impl Walker {
                     self.report.assets_cached += 1;
                 }
                 self.report.bytes_fetched += f.downloaded;
+                let by_kind = match self.kinds.remove(&hash) {
+                    Some(horizon_protocol::EntryKind::Object) => &mut self.report.bytes_objects,
+                    Some(horizon_protocol::EntryKind::Impostor) => {
+                        &mut self.report.bytes_impostors
+                    }
+                    _ => &mut self.report.bytes_aggregates,
+                };
+                *by_kind += f.downloaded;
                 if self.needed.contains(&hash) {
                     self.missing = self.missing.saturating_sub(1);
                 }

@@ -8,20 +8,26 @@
 #     floor: objects that subtend min_solid_angle are always sent as themselves);
 #   - handover: `fidelity --impostors --node N` for up to NODES (default 8) seeded nodes with
 #     an impostor: impostor against aggregate, each alone, at the impostor's handover
-#     distance for the renderer's pixel.
+#     distance for the renderer's pixel;
+#   - walking: a 60 s `horizon-client walk` on each world from street level (the middle of
+#     its near edge, 2 m up) out to the outside view (0.9 extents out, 0.2 up), with and
+#     without impostors, its bytes split by the kind of entry that asked for them: the far
+#     field's bytes per second against those of the objects near the walker.
 # Worlds are generated with seed 1 into WORK (default /tmp/horizon-impostors) and built there
 # once (delete WORK/WORLD/.built to rebuild). Tables go to OUT/.
 #
-#   cargo build --release -p horizon-server && cargo build --release -p horizon-lab
+#   cargo build --release -p horizon-server && cargo build --release -p horizon-lab \
+#     && cargo build --release -p horizon-client
 #   bash lab/bench/impostors.sh lab/results/impostors
 set -euo pipefail
 OUT=${1:-lab/results/impostors}
 WORK=${WORK:-/tmp/horizon-impostors}
 H=${H:-target/release/horizon}
 L=${L:-target/release/horizon-lab}
+C=${C:-target/release/horizon-client}
 DISTINCT=${DISTINCT:-2000}
 NODES=${NODES:-8}
-WORLDS=${WORLDS:-city city-distinct}
+WORLDS=${WORLDS:-village city city-distinct}
 mkdir -p "$OUT" "$WORK"
 for world in $WORLDS; do
   dir="$WORK/$world"
@@ -76,3 +82,52 @@ EOF
     "$L" fidelity "$WORK/$world" --impostors --node "$node" | tail -n 1 >> "$OUT/${world}_handover.md"
   done
 done
+
+# The walks, each world served on its own.
+pid=
+cleanup() { if [ -n "$pid" ]; then kill "$pid" 2>/dev/null || true; wait "$pid" 2>/dev/null || true; fi; }
+trap cleanup EXIT
+for world in $WORLDS; do
+  dir="$WORK/$world"
+  rm -f "$dir/world.lock"
+  "$H" serve "$dir" --listen 127.0.0.1:0 > "$WORK/serve.out" 2> "$WORK/serve.log" &
+  pid=$!
+  for _ in $(seq 600); do
+    if grep -q "^listening on " "$WORK/serve.out" 2>/dev/null; then break; fi
+    sleep 0.2
+  done
+  url=$(sed -n 's/^listening on //p' "$WORK/serve.out" | head -1)
+  [ -n "$url" ] || { echo "horizon serve did not start" >&2; cat "$WORK/serve.log" >&2; exit 1; }
+  python3 - "$url" > "$WORK/path_$world.json" <<'EOF'
+import json, sys, urllib.request
+b = json.load(urllib.request.urlopen(sys.argv[1] + "/v1/world"))["bounds"]
+lo, hi = b["min"], b["max"]
+cx, cz = (lo[0] + hi[0]) / 2, (lo[2] + hi[2]) / 2
+extent = max(hi[0] - lo[0], hi[2] - lo[2])
+print(json.dumps([[cx, 2.0, lo[2] + 2.0], [cx, 0.2 * extent, cz - 0.9 * extent]]))
+EOF
+  speed=$(python3 -c "import json,math,sys; p=json.load(open(sys.argv[1])); print(math.dist(p[0], p[1]) / 60)" "$WORK/path_$world.json")
+  for mode in with without; do
+    extra=()
+    if [ "$mode" = without ]; then extra=(--no-impostors); fi
+    "$C" walk "$url" --path "$WORK/path_$world.json" --speed "$speed" --duration 60 "${extra[@]}" \
+      --json > "$OUT/${world}_walk_$mode.json"
+  done
+  kill "$pid"; wait "$pid" 2>/dev/null || true; pid=
+done
+python3 - "$OUT" $WORLDS <<'EOF'
+import json, pathlib, sys
+out, worlds = pathlib.Path(sys.argv[1]), sys.argv[2:]
+lines = ["| world | impostors | bytes/s in all | objects | aggregates | impostors | all / objects | incomplete frames |",
+         "|---|---|---|---|---|---|---|---|"]
+for world in worlds:
+    for mode in ["without", "with"]:
+        r = json.loads((out / f"{world}_walk_{mode}.json").read_text())
+        s = max(r["seconds"], 1e-9)
+        rate = lambda k: r[k] / s / 1e6
+        lines.append(f"| {world} | {mode} | {rate('bytes_fetched'):.2f} MB/s | {rate('bytes_objects'):.2f} | "
+                     f"{rate('bytes_aggregates'):.2f} | {rate('bytes_impostors'):.2f} | "
+                     f"{r['bytes_fetched'] / max(r['bytes_objects'], 1):.2f}x | {r['incomplete_share'] * 100:.1f}% |")
+(out / "walk.md").write_text("\n".join(lines) + "\n")
+print("\n".join(lines))
+EOF
