@@ -497,9 +497,7 @@ impl Walker {
                 self.report.bytes_fetched += f.downloaded;
                 let by_kind = match self.kinds.remove(&hash) {
                     Some(horizon_protocol::EntryKind::Object) => &mut self.report.bytes_objects,
-                    Some(horizon_protocol::EntryKind::Impostor) => {
-                        &mut self.report.bytes_impostors
-                    }
+                    Some(horizon_protocol::EntryKind::Impostor) => &mut self.report.bytes_impostors,
                     _ => &mut self.report.bytes_aggregates,
                 };
                 *by_kind += f.downloaded;

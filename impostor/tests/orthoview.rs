@@ -284,3 +284,46 @@ fn every_view_from_above_is_within_theta_of_a_world_direction_and_faces_two_or_t
     // Looking up, nothing faces: the cut draws geometry.
     assert!(facing(&WORLD_DIRECTIONS, Vec3::Y).is_empty());
 }
+
+/// An orthoview's splats: one square per covered pixel, centred on its sample, facing against
+/// the direction (towards a viewer looking along it), and ray-cast along the direction they
+/// give back the orthoview's depths.
+#[test]
+fn splats_stand_on_their_samples_and_render_back_the_depths() {
+    let (min, max) = (Vec3::ZERO, Vec3::new(2.0, 1.0, 1.5));
+    let s = scene(&[cuboid(min, max)]);
+    for d in [[0, -1, 0], [1, -1, 1], [-1, 0, 1]] {
+        let view = Orthoview::render(&s, &aabb(min, max), d, 24);
+        let mesh = view.splats();
+        mesh.validate().unwrap();
+        let sub = &mesh.submeshes[0];
+        assert_eq!(sub.indices.len(), 6 * view.covered());
+        let dir = Vec3::new(f32::from(d[0]), f32::from(d[1]), f32::from(d[2])).normalize();
+        for t in sub.indices.chunks(3) {
+            let [a, b, c] = [0, 1, 2].map(|k| sub.positions[t[k] as usize]);
+            let facing = (b - a).cross(c - a).normalize();
+            assert!(
+                (facing + dir).length() < 1e-3,
+                "{d:?}: a splat faces {facing}"
+            );
+        }
+        // Ray-cast along the direction, the splats stand where the cube's surface is.
+        let splats = scene(&[mesh]);
+        let again = Orthoview::render(&splats, &aabb(min, max), d, 24);
+        let pixel = view.pixel_size();
+        let mut compared = 0;
+        for y in 0..view.height {
+            for x in 0..view.width {
+                if let (Some(p), Some(q)) = (view.point(x, y), again.point(x, y)) {
+                    assert!((p - q).length() <= 2.0 * pixel, "{d:?}: ({x}, {y})");
+                    compared += 1;
+                }
+            }
+        }
+        assert!(
+            compared * 10 >= view.covered() * 9,
+            "{d:?}: {compared} of {}",
+            view.covered()
+        );
+    }
+}
