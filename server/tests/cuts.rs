@@ -1196,4 +1196,45 @@ async fn impostors_stand_for_far_nodes_and_cuts_stay_complete() {
         before = now;
     }
     assert!(replaced > 0, "no impostor was replaced on the way in");
+    // A placement and the rebuild (the live worker's): the impostors of the new object's
+    // ancestors are made again, the others kept, and the far cut stays complete.
+    let model = world.all_models().unwrap()[2].id.clone();
+    world
+        .apply(
+            None,
+            &[Change::Create {
+                model,
+                transform: Affine3A::from_translation(Vec3::new(4.0, 0.0, 4.0)),
+            }],
+        )
+        .unwrap();
+    world
+        .rebuild_aggregates(AggregateOptions::default(), &|_| {})
+        .unwrap();
+    let after = world.published_manifest().unwrap().expect("a manifest");
+    assert_eq!(after.impostors.len(), after.nodes.len());
+    let before_keys: HashSet<&String> = manifest.impostors.values().map(|e| &e.key).collect();
+    let remade = after
+        .impostors
+        .values()
+        .filter(|e| !before_keys.contains(&e.key))
+        .count();
+    let rebuilt = after
+        .nodes
+        .values()
+        .filter(|e| !manifest.nodes.values().any(|m| m.key == e.key))
+        .count();
+    assert_eq!(remade, rebuilt, "one impostor remade per aggregate rebuilt");
+    assert!(remade > 0 && remade < after.nodes.len());
+    for e in after.impostors.values() {
+        for blob in e.blobs() {
+            assert!(
+                world.blob(blob).unwrap().is_some(),
+                "an impostor image is missing"
+            );
+        }
+    }
+    let far = cut(&app, "eye=-5000,300,0").await;
+    assert_complete(&world, &far);
+    assert!(far.entries.iter().all(|e| e.kind == EntryKind::Impostor));
 }
