@@ -11,8 +11,7 @@
 //!    children all have impostors is composited from their orthoviews (minimum depth,
 //!    averaged within a depth threshold: [`Orthoview::composite`]); any other (the leaves of
 //!    the impostor hierarchy) is ray-cast from its objects at full detail
-//!    ([`Orthoview::render`]) at twice the resolution and composited down once, so that a
-//!    pixel's coverage is the share of it covered. A child's orthoviews come from this build or, reused, from
+//!    ([`Orthoview::render`]), a ray per pixel; coverage below full comes from compositing. A child's orthoviews come from this build or, reused, from
 //!    their stored images.
 //! 4. **encode**: three lossless PNGs per direction (colour, 16-bit depth, octahedral
 //!    normals), content-addressed through the store, committed once.
@@ -40,7 +39,7 @@ use crate::source::ModelSource;
 use crate::store::{AggregateEntry, AggregateStore};
 
 /// Version of the impostor format; part of every impostor key.
-pub const IMPOSTOR_FORMAT: u32 = 3;
+pub const IMPOSTOR_FORMAT: u32 = 4;
 
 /// The solid angle of a client's pixel the orthoviews are made for: 1920 pixels across a
 /// 60-degree field of view, the wire's default `pixel_solid_angle`.
@@ -330,7 +329,9 @@ fn composite_views(children: &[Arc<Vec<Orthoview>>], q: u32) -> Vec<Orthoview> {
         .collect()
 }
 
-/// A node's orthoviews ray-cast from its objects, at full detail, four rays per pixel.
+/// A node's orthoviews ray-cast from its objects, at full detail, a ray per pixel (four, to
+/// measure coverage, cost the build 3.6 times as much on the city for no measured gain:
+/// `lab/results/impostors.md`).
 fn render_views(
     bvh: &Bvh,
     node: NodeId,
@@ -363,12 +364,7 @@ fn render_views(
     let scene = scene.build();
     Ok(WORLD_DIRECTIONS
         .iter()
-        .map(|&d| {
-            // At twice the resolution, composited down once: a pixel's coverage is then the
-            // share of its area covered, and a thin fence stays thin.
-            let fine = Orthoview::render(&scene, &bounds, d, 2 * q);
-            Orthoview::composite(&[&fine], &bounds, d, q)
-        })
+        .map(|&d| Orthoview::render(&scene, &bounds, d, q))
         .collect())
 }
 
