@@ -60,7 +60,9 @@ test('boot: the first complete view comes without console errors and is not blan
 });
 
 test('fidelity: the cut at seeded views against every object as its model', async (t) => {
-  const cut = await withPage(t, '');
+  // Meshes alone: impostors' fidelity is the impostor test's (the village is built with an
+  // impostor on every node, paying or not).
+  const cut = await withPage(t, '?impostors=0');
   const full = await withPage(t, '?full');
   for (const v of views(bounds, 1)) {
     await goTo(cut, server.url, v.eye, v.target);
@@ -126,7 +128,7 @@ test('impostors: a high view draws orthoview splats, complete and close to full 
   const [pa, pb] = [psnr(a, f), psnr(b, f)];
   console.log(`impostors: ${s.impostors} drawn; against full detail PSNR ${pa.toFixed(1)} dB with them, ${pb.toFixed(1)} dB without; SSIM ${ssim(a, f).toFixed(4)} / ${ssim(b, f).toFixed(4)}`);
   assert.ok(drawnShare(a, SKY) > 0.05, 'the frame is nearly all sky');
-  // Measured 26.3 dB with them against 36.0 dB without (SSIM 0.960 / 0.995): the village's
+  // Measured 25.7 to 26.3 dB with them against 36.0 dB without (SSIM 0.96 / 0.995): the village's
   // fences, thinner than a pixel, keep their area as splats where full detail, rasterised
   // without antialiasing, drops most of them (lab/results/impostors.md).
   const sa = ssim(a, f);
