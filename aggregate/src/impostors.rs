@@ -315,8 +315,10 @@ fn choose(
 
 /// A node's orthoviews composited from its children's.
 fn composite_views(children: &[Arc<Vec<Orthoview>>], q: u32) -> Vec<Orthoview> {
+    // Children that show nothing add nothing (a stored empty box reads back as a point).
     let bounds = children
         .iter()
+        .filter(|c| c.iter().any(|v| v.covered() > 0))
         .filter_map(|c| c.first())
         .fold(Aabb::EMPTY, |b, v| b.union(&v.bounds));
     WORLD_DIRECTIONS

@@ -712,7 +712,10 @@ impl<'w> Assets<'w> {
         imp: &horizon_protocol::Impostor,
         v: &horizon_protocol::ImpostorView,
     ) -> anyhow::Result<Arc<PreparedMesh>> {
-        let key = format!("splats:{}:{}", v.color, v.depth);
+        let key = format!(
+            "splats:{}:{}:{}:{:?}:{:?}:{:?}",
+            v.color, v.depth, v.normal, v.direction, imp.min, imp.max
+        );
         if let Some(p) = self.prepared.get(&key) {
             return Ok(p.0.clone());
         }

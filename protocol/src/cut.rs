@@ -231,8 +231,8 @@ pub struct Placement {
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct Entry {
     /// Names one content, never two: `o:<object id>@<generation that placed it>` for an
-    /// object, `n:<node id>@<asset hash>` for an aggregate, `n:<node id>@<hash of its views>`
-    /// for an impostor.
+    /// object, `n:<node id>@<asset hash>` for an aggregate, `n:<node id>@<impostor key>.<views
+    /// sent, a bit each, hex>` for an impostor.
     pub id: String,
     /// What it is.
     pub kind: EntryKind,
@@ -250,7 +250,7 @@ pub struct Entry {
     pub pending: bool,
     /// Asset bytes.
     pub bytes: u64,
-    /// Triangles drawn.
+    /// Triangles drawn (0 for an impostor: its splats are not counted as triangles).
     pub triangles: u64,
     /// Draw calls.
     pub draw_calls: u64,

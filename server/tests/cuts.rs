@@ -1237,4 +1237,45 @@ async fn impostors_stand_for_far_nodes_and_cuts_stay_complete() {
     let far = cut(&app, "eye=-5000,300,0").await;
     assert_complete(&world, &far);
     assert!(far.entries.iter().all(|e| e.kind == EntryKind::Impostor));
+    // Once a third build is published, the first one's images that neither of the two
+    // published manifests names are collected.
+    let model = world.all_models().unwrap()[1].id.clone();
+    world
+        .apply(
+            None,
+            &[Change::Create {
+                model,
+                transform: Affine3A::from_translation(Vec3::new(100.0, 0.0, 100.0)),
+            }],
+        )
+        .unwrap();
+    world
+        .rebuild_aggregates(AggregateOptions::default(), &|_| {})
+        .unwrap();
+    let third = world.published_manifest().unwrap().expect("a manifest");
+    let named: HashSet<&String> = third
+        .impostors
+        .values()
+        .chain(after.impostors.values())
+        .flat_map(|e| e.blobs())
+        .collect();
+    let first_only: Vec<&String> = manifest
+        .impostors
+        .values()
+        .flat_map(|e| e.blobs())
+        .filter(|h| !named.contains(h))
+        .collect();
+    assert!(
+        !first_only.is_empty(),
+        "the first build's images are all still named"
+    );
+    for h in first_only {
+        assert!(world.blob(h).unwrap().is_none(), "{h} was not collected");
+    }
+    for h in &named {
+        assert!(
+            world.blob(h).unwrap().is_some(),
+            "{h} was collected while named"
+        );
+    }
 }

@@ -11,9 +11,12 @@ import { GLTFLoader } from 'three/addons/loaders/GLTFLoader.js';
 import { MeshoptDecoder } from 'three/addons/libs/meshopt_decoder.module.js';
 import { loadView } from './impostor.js';
 
-/** The key an impostor's orthoview is kept under. */
-export function viewKey(view) {
-  return `orthoview:${view.color}`;
+/**
+ * The key an impostor's orthoview is kept under: its three images, direction and box (two
+ * views may share a colour image and stand elsewhere).
+ */
+export function viewKey(view, box) {
+  return `orthoview:${view.color}:${view.depth}:${view.normal}:${view.direction}:${box.min}:${box.max}`;
 }
 
 export class AssetStore {

@@ -123,7 +123,7 @@ export class World {
     const hashes = [...new Set(data.assets.filter((a) => a.role !== 'orthoview' && a.role !== 'preview').map((a) => a.hash))];
     // An impostor's assets are its views, each loaded from its three images.
     const views = data.impostor ? data.impostor.views : [];
-    for (const view of views) hashes.push(viewKey(view));
+    for (const view of views) hashes.push(viewKey(view, data.impostor));
     e.waiting = hashes.length;
     e.hashes = hashes;
     // Progressive loading: an object whose own level is not loaded yet is first drawn with its
@@ -144,7 +144,7 @@ export class World {
         () => {},
       );
     }
-    const viewOf = new Map(views.map((view) => [viewKey(view), view]));
+    const viewOf = new Map(views.map((view) => [viewKey(view, data.impostor), view]));
     for (const hash of hashes) {
       const view = viewOf.get(hash);
       const options = view ? { view, box: data.impostor } : {};

@@ -1153,9 +1153,15 @@ impl World {
         let published = Published {
             generation,
             manifest: Some(manifest.clone()),
-            previous_manifest: previous.manifest.filter(|m| *m != manifest),
+            previous_manifest: previous.manifest.clone().filter(|m| *m != manifest),
             rebuild_ms: Some(started.elapsed().as_millis() as u64),
         };
+        // The manifest no longer published: its orthoview images go unless still named.
+        let dropped = previous
+            .previous_manifest
+            .clone()
+            .filter(|m| Some(m) != published.manifest.as_ref())
+            .filter(|m| Some(m) != published.previous_manifest.as_ref());
         self.meta.publish(&published)?;
         {
             let mut s = self.lock_status()?;
@@ -1170,7 +1176,8 @@ impl World {
         }
         self.changed.notify_all();
         self.tell_listeners();
-        let removed_blobs = self.collect_garbage(&outcome.manifest, &published)?;
+        let removed_blobs =
+            self.collect_garbage(&outcome.manifest, &published, dropped.as_deref())?;
         if generation.saturating_sub(self.lock_status()?.snapshot) >= SNAPSHOT_EVERY {
             self.save_snapshot(&tree)?;
         }
@@ -1182,12 +1189,14 @@ impl World {
     }
 
     /// Deletes the aggregate blobs and entries that neither the published manifest nor the
-    /// one before it names (clients may still fetch what the one before named). Models,
-    /// manifests and snapshots are never collected here.
+    /// one before it names (clients may still fetch what the one before named), and the
+    /// orthoview images of `dropped` (the manifest no longer published) that neither names.
+    /// Models, manifests and snapshots are never collected here.
     fn collect_garbage(
         &self,
         current: &AggregateManifest,
         published: &Published,
+        dropped: Option<&str>,
     ) -> Result<usize, WorldError> {
         let mut keep = named_blobs(current);
         let mut keys: Vec<String> = current.nodes.values().map(|e| e.key.clone()).collect();
@@ -1204,6 +1213,15 @@ impl World {
         };
         for entry in recorded.iter().filter(|e| !kept.contains(&e.key)) {
             for hash in std::iter::once(&entry.glb).chain(entry.parts.as_ref()) {
+                if !keep.contains(hash) {
+                    self.blobs.delete(hash)?;
+                    keep.insert(hash.clone());
+                    removed += 1;
+                }
+            }
+        }
+        if let Some(old) = self.read_manifest(dropped).ok().flatten() {
+            for hash in old.impostors.values().flat_map(|e| e.blobs()) {
                 if !keep.contains(hash) {
                     self.blobs.delete(hash)?;
                     keep.insert(hash.clone());

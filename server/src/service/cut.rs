@@ -128,8 +128,9 @@ pub struct Decisions {
     pending: Vec<(ObjectId, bool)>,
     /// Each object entry's own level of detail (before models share levels).
     levels: Vec<(ObjectId, u8)>,
-    /// Every node in the cut that has an impostor, and the views sent of it (0: none, its
-    /// aggregate draws it), with what deciding that again needs.
+    /// Every node with an impostor that refinement put in the cut (also those refined later),
+    /// and the views it was charged for (0: none, its aggregate), with what deciding that
+    /// again needs.
     impostors: Vec<(NodeId, u16)>,
     nodes: Arc<NodeAssets>,
     pixel_angle: f32,
@@ -420,7 +421,7 @@ impl NodeImpostor {
 
     /// What sending the views of `mask` costs: bytes and draw calls (one per view).
     fn cost(&self, mask: u16) -> (u64, u64) {
-        let chosen = (0..self.bytes.len()).filter(|&i| mask & (1 << i) != 0);
+        let chosen = (0..self.bytes.len().min(16)).filter(|&i| mask & (1 << i) != 0);
         chosen.fold((0, 0), |(b, d), i| (b + self.bytes[i], d + 1))
     }
 }
@@ -658,6 +659,8 @@ struct Planner<'a> {
     held_levels: HashMap<u64, u8>,
     /// The angle of one pixel, radians.
     pixel_angle: f32,
+    /// Each node with an impostor put in the cut, and the views it was charged for.
+    impostor_choices: Vec<(NodeId, u16)>,
 }
 
 impl<'a> Planner<'a> {
@@ -704,6 +707,7 @@ impl<'a> Planner<'a> {
             over_at_seed: false,
             held_levels: HashMap::new(),
             pixel_angle: pixel_angle(view),
+            impostor_choices: Vec::new(),
         }
     }
 
@@ -855,6 +859,12 @@ impl<'a> Planner<'a> {
                     .map_or(0, |n| u64::from(n.count()));
                 if count > extracted.len() as u64 {
                     let views = self.impostor_views(node);
+                    let has_impostor = self.aggregate(node).is_some_and(|a| a.impostor.is_some());
+                    if sign > 0 && self.view.impostors && has_impostor {
+                        // Every choice that cost something, also of nodes refined later: under
+                        // a byte or draw-call budget it moved where refinement stopped.
+                        self.impostor_choices.push((node, views));
+                    }
                     if let Some(a) = self.aggregate(node) {
                         let (key, bytes, draw_calls, triangles) =
                             match a.impostor.as_ref().filter(|_| views != 0) {
@@ -974,20 +984,11 @@ impl<'a> Planner<'a> {
                 })
                 .collect(),
             levels: Vec::new(),
-            impostors: if self.view.impostors {
-                self.units
-                    .iter()
-                    .filter_map(|u| match *u {
-                        Unit::Node(n) => {
-                            let a = self.aggregate(n)?;
-                            a.impostor.as_ref()?;
-                            Some((n, self.impostor_views(n)))
-                        }
-                        Unit::Object(_) => None,
-                    })
-                    .collect()
-            } else {
-                Vec::new()
+            impostors: {
+                let mut choices = std::mem::take(&mut self.impostor_choices);
+                choices.sort_unstable_by_key(|&(n, _)| n.0);
+                choices.dedup();
+                choices
             },
             nodes: self.nodes.clone(),
             pixel_angle: self.pixel_angle,
