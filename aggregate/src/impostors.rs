@@ -39,7 +39,7 @@ use crate::source::ModelSource;
 use crate::store::{AggregateEntry, AggregateStore};
 
 /// Version of the impostor format; part of every impostor key.
-pub const IMPOSTOR_FORMAT: u32 = 4;
+pub const IMPOSTOR_FORMAT: u32 = 5;
 
 /// The solid angle of a client's pixel the orthoviews are made for: 1920 pixels across a
 /// 60-degree field of view, the wire's default `pixel_solid_angle`.
