@@ -466,18 +466,7 @@ fn focus(
         let directions: Vec<[i8; 3]> = imp.views.iter().map(|v| v.direction).collect();
         let views = horizon_impostor::facing(&directions, centre - eye)
             .into_iter()
-            .map(|i| {
-                let v = &imp.views[i];
-                horizon_protocol::ImpostorView {
-                    direction: v.direction,
-                    width: v.width,
-                    height: v.height,
-                    pixel: v.pixel,
-                    color: v.color.clone(),
-                    depth: v.depth.clone(),
-                    normal: v.normal.clone(),
-                }
-            })
+            .map(|i| horizon_server::service::cut::wire_view(&imp.views[i]))
             .collect();
         drawn = vec![Entry {
             id: format!("n:{node}@{}", imp.key),

@@ -1150,6 +1150,19 @@ impl Planned {
     }
 }
 
+/// A stored orthoview as the wire names it (the lab's measures use it too).
+pub fn wire_view(v: &horizon_aggregate::ImpostorView) -> ImpostorView {
+    ImpostorView {
+        direction: v.direction,
+        width: v.width,
+        height: v.height,
+        pixel: v.pixel,
+        color: v.color.clone(),
+        depth: v.depth.clone(),
+        normal: v.normal.clone(),
+    }
+}
+
 /// The first 64 bits of a hex content hash (0 for a hash too short to have them).
 fn content_bits(hash: &str) -> u64 {
     hash.get(..16)
@@ -1288,18 +1301,7 @@ impl Plan {
             impostor: Some(Impostor {
                 min: imp.map_or([0.0; 3], |i| i.min),
                 max: imp.map_or([0.0; 3], |i| i.max),
-                views: chosen
-                    .iter()
-                    .map(|v| ImpostorView {
-                        direction: v.direction,
-                        width: v.width,
-                        height: v.height,
-                        pixel: v.pixel,
-                        color: v.color.clone(),
-                        depth: v.depth.clone(),
-                        normal: v.normal.clone(),
-                    })
-                    .collect(),
+                views: chosen.iter().map(|v| wire_view(v)).collect(),
             }),
         }
     }
