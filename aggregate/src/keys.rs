@@ -46,7 +46,7 @@ pub fn node_keys(
                         let obj = bvh
                             .object(o)
                             .ok_or_else(|| AggregateError::Tree(format!("no object {}", o.0)))?;
-                        let mut bytes = models.model(obj.model())?.hash.clone().into_bytes();
+                        let mut bytes = models.hash(obj.model())?.into_bytes();
                         for v in obj.transform().to_cols_array() {
                             bytes.extend_from_slice(&v.to_bits().to_le_bytes());
                         }

@@ -62,12 +62,39 @@ impl SourceModel {
             part_spheres,
         }
     }
+
+    /// Estimated bytes it holds in memory: its vertices, indices, encoded textures and
+    /// placements (what a bounded model cache weighs it by).
+    pub fn bytes(&self) -> usize {
+        let submeshes: usize = self.mesh.submeshes.iter().map(submesh_bytes).sum();
+        let textures: usize = self.mesh.textures.iter().map(|t| t.bytes.len()).sum();
+        let placements: usize = self.placements.iter().map(|p| p.len() * 48).sum();
+        submeshes
+            + textures
+            + placements
+            + self.mesh.instances.len() * 64
+            + (self.shape.len() + self.texture.len()) * 4
+    }
+}
+
+/// Estimated bytes a submesh holds: its vertex attributes and indices.
+pub(crate) fn submesh_bytes(s: &horizon_mesh::Submesh) -> usize {
+    s.positions.len() * 12
+        + s.normals.as_ref().map_or(0, |n| n.len() * 12)
+        + s.uvs.as_ref().map_or(0, |u| u.len() * 8)
+        + s.colors.as_ref().map_or(0, |c| c.len() * 16)
+        + s.indices.len() * 4
 }
 
 /// Where the rebuild gets models from, by the BVH's model number.
 pub trait ModelSource: Sync {
     /// The model numbered `model`.
     fn model(&self, model: u64) -> Result<Arc<SourceModel>, AggregateError>;
+    /// The content hash of the model numbered `model`. A source that keeps only some models
+    /// in memory answers this without loading the model.
+    fn hash(&self, model: u64) -> Result<String, AggregateError> {
+        Ok(self.model(model)?.hash.clone())
+    }
     /// The number of a model by content hash, if the world has it.
     fn by_hash(&self, hash: &str) -> Option<u64>;
 }
