@@ -1,5 +1,5 @@
 //! One node's aggregate (core paper sections 5 to 7): gather the children's representations,
-//! cull what cannot show, dedup near-duplicates (Table 1), merge into one instanced mesh,
+//! cull what cannot show, bound what enters the merge ([`MERGE_TRIANGLES`]), dedup near-duplicates (Table 1), merge into one instanced mesh,
 //! simplify with IAS to the node's budget, draw the objects whose simplified parts lost their
 //! shape (and, over the budget, the smallest others) as box proxies (`proxy.rs`), atlas, merge the parts placed alike and bake the
 //! placements that cost less written out than instanced into one submesh
@@ -135,6 +135,10 @@ pub struct NodeStats {
     /// Objects drawn as box proxies to fit the budget.
     #[serde(default)]
     pub proxied_budget: usize,
+    /// Of `proxied_budget`, the objects drawn as box proxies without entering the merge,
+    /// because the node's larger objects already fill [`MERGE_TRIANGLES`].
+    #[serde(default)]
+    pub proxied_merge: usize,
     /// The largest footprint among the latter, pixels at the nearest display distance.
     #[serde(default)]
     pub proxied_pixels: f64,
@@ -270,6 +274,9 @@ pub fn generate_with(
     // Stage 2, cull: objects under `cull_pixels` at the nearest display distance cannot show.
     let kept = cull(input, options);
     stats.culled = input.placements.len() - kept.len();
+    // Stage 2b, bound the merge: past MERGE_TRIANGLES, the smallest go straight to proxies.
+    let (kept, forced) = bound_merge(input, kept, &versions, models)?;
+    stats.proxied_merge = forced.len();
     // Stage 3, dedup (section 5.1).
     let sources = load_models(kept.iter().map(|p| p.model), models)?;
     stats.stages.gather = lap.lap();
@@ -408,6 +415,8 @@ pub fn generate_with(
             objects: &objects,
             parts: &parts,
             sources: &sources,
+            forced: &forced,
+            models,
             budget: stats.budget,
             display: &input.display,
         },
@@ -498,6 +507,78 @@ fn coarsest_versions(children: &[Arc<Handoff>]) -> BTreeMap<PartKey, Arc<Submesh
         }
     }
     out
+}
+
+/// Unique triangles a node's merge may hold (what IAS loads: its memory grows with them, about
+/// a kilobyte each). On a world of distinct models whose parts IAS cannot simplify (seams,
+/// materials), every level would otherwise hand its parent nearly the full detail of all it
+/// covers, and a node over 10,000 buildings would load 14 million triangles. Past it, objects
+/// are taken largest on screen first and the rest are drawn as box proxies (`proxy.rs`),
+/// without their models entering the merge.
+pub const MERGE_TRIANGLES: u64 = 1_000_000;
+
+/// Splits the kept placements into those merged and those drawn as proxies straight away
+/// ([`MERGE_TRIANGLES`]). A model's triangles are its versions' where children drew it, its
+/// own otherwise, and count once however many objects place it. Reads no model.
+fn bound_merge(
+    input: &NodeInput,
+    kept: Vec<Placement>,
+    versions: &BTreeMap<PartKey, Arc<Submesh>>,
+    models: &dyn ModelSource,
+) -> Result<(Vec<Placement>, Vec<ObjectPlacement>), AggregateError> {
+    let mut version_triangles: BTreeMap<u64, u64> = BTreeMap::new();
+    for (&(model, _), sub) in versions {
+        *version_triangles.entry(model).or_default() += sub.triangle_count();
+    }
+    let mut triangles: BTreeMap<u64, u64> = BTreeMap::new();
+    for p in &kept {
+        if let std::collections::btree_map::Entry::Vacant(e) = triangles.entry(p.model) {
+            e.insert(match version_triangles.get(&p.model) {
+                Some(&t) => t,
+                None => models.triangles(p.model)?,
+            });
+        }
+    }
+    if triangles.values().sum::<u64>() <= MERGE_TRIANGLES {
+        return Ok((kept, Vec::new()));
+    }
+    let mut order: Vec<(f64, usize)> = kept
+        .iter()
+        .enumerate()
+        .map(|(i, p)| (input.display.object_pixels(p.centre, p.radius), i))
+        .collect();
+    order.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
+    let mut merged_models: std::collections::BTreeSet<u64> = Default::default();
+    let mut total = 0;
+    let mut take = vec![false; kept.len()];
+    for (_, i) in order {
+        let model = kept[i].model;
+        let added = if merged_models.contains(&model) {
+            0
+        } else {
+            triangles[&model]
+        };
+        // The largest object always enters, so that an aggregate is never all proxies.
+        if total + added <= MERGE_TRIANGLES || total == 0 {
+            total += added;
+            merged_models.insert(model);
+            take[i] = true;
+        }
+    }
+    let (mut merged, mut forced) = (Vec::new(), Vec::new());
+    for (p, t) in kept.into_iter().zip(take) {
+        if t {
+            merged.push(p);
+        } else {
+            forced.push(ObjectPlacement {
+                model: p.model,
+                transform: p.transform,
+                centre: p.centre,
+                radius: p.radius,
+            });
+        }
+    }
+    Ok((merged, forced))
 }
 
 /// The placements big enough to show, or the largest one if none is.
@@ -611,5 +692,89 @@ impl Merger {
         let i = self.mesh.materials.len() - 1;
         self.materials.insert(key, i);
         Some(i)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::source::InMemoryModels;
+
+    /// A model of one submesh with `triangles` triangles (all on one degenerate corner: only
+    /// the count matters here).
+    fn model(hash: &str, triangles: usize) -> SourceModel {
+        let mesh = InstancedMesh {
+            submeshes: vec![Submesh {
+                positions: vec![Vec3::ZERO, Vec3::X, Vec3::Y],
+                indices: [0, 1, 2].repeat(triangles),
+                ..Submesh::default()
+            }],
+            instances: vec![Instance {
+                submesh: 0,
+                transform: Affine3A::IDENTITY,
+            }],
+            ..InstancedMesh::default()
+        };
+        SourceModel::new(hash.into(), mesh, Vec::new(), Vec::new())
+    }
+
+    fn input(placements: Vec<Placement>) -> NodeInput {
+        NodeInput {
+            node: 0,
+            display: Display::of(Vec3::ZERO, 50.0, 10.0, &AggregateOptions::default()),
+            outer_radius: 60.0,
+            placements,
+            children: Vec::new(),
+            atlas: false,
+        }
+    }
+
+    fn at(model: u64, x: f32, radius: f32) -> Placement {
+        Placement {
+            model,
+            transform: Affine3A::from_translation(Vec3::new(x, 0.0, 0.0)),
+            centre: Vec3::new(x, 0.0, 0.0),
+            radius,
+        }
+    }
+
+    #[test]
+    fn the_merge_takes_the_largest_objects_up_to_its_bound_and_proxies_the_rest() {
+        let half = MERGE_TRIANGLES as usize / 2 + 1;
+        let models = InMemoryModels::new(vec![model("a", half), model("b", half), model("c", 10)]);
+        // Under the bound: everything merges.
+        let small = input(vec![at(0, 0.0, 5.0), at(2, 10.0, 1.0)]);
+        let (merged, forced) =
+            bound_merge(&small, small.placements.clone(), &BTreeMap::new(), &models).unwrap();
+        assert_eq!((merged.len(), forced.len()), (2, 0));
+        // Two distinct halves do not fit: the larger on screen merges, the smaller is a proxy;
+        // a second placement of a merged model costs nothing more and merges too.
+        let big = input(vec![
+            at(0, 0.0, 2.0),
+            at(1, 10.0, 8.0),
+            at(1, -10.0, 1.0),
+            at(2, 20.0, 1.0),
+        ]);
+        let (merged, forced) =
+            bound_merge(&big, big.placements.clone(), &BTreeMap::new(), &models).unwrap();
+        let merged_models: Vec<u64> = merged.iter().map(|p| p.model).collect();
+        assert_eq!(merged_models, vec![1, 1, 2], "{merged:?}");
+        assert_eq!(forced.len(), 1);
+        assert_eq!(forced[0].model, 0);
+        // Children's versions count instead of the model's own triangles.
+        let mut versions = BTreeMap::new();
+        versions.insert((0, 0), Arc::new(model("a'", 100).mesh.submeshes[0].clone()));
+        let (merged, forced) =
+            bound_merge(&big, big.placements.clone(), &versions, &models).unwrap();
+        assert_eq!((merged.len(), forced.len()), (4, 0));
+    }
+
+    #[test]
+    fn an_object_over_the_bound_alone_still_merges() {
+        let models = InMemoryModels::new(vec![model("a", MERGE_TRIANGLES as usize + 1)]);
+        let one = input(vec![at(0, 0.0, 2.0)]);
+        let (merged, forced) =
+            bound_merge(&one, one.placements.clone(), &BTreeMap::new(), &models).unwrap();
+        assert_eq!((merged.len(), forced.len()), (1, 0));
     }
 }

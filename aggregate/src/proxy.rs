@@ -32,7 +32,7 @@ use horizon_mesh::{Instance, InstancedMesh, Material, Submesh, Texture, TextureR
 
 use crate::budget::Display;
 use crate::generate::PartKey;
-use crate::source::SourceModel;
+use crate::source::{ModelSource, SourceModel};
 
 /// The share of a model's surface area its simplified parts must keep to be drawn as
 /// themselves; below it the model's box proxy is drawn. A box reduced to a tetrahedron keeps
@@ -75,7 +75,6 @@ pub struct ProxyReport {
 }
 
 /// Everything [`apply`] reads besides the mesh.
-#[derive(Debug)]
 pub struct ProxyInput<'a> {
     /// For every instance of the mesh, its object (index into `objects`).
     pub instance_objects: &'a [usize],
@@ -85,10 +84,26 @@ pub struct ProxyInput<'a> {
     pub parts: &'a [(PartKey, Option<usize>)],
     /// The source models by number.
     pub sources: &'a BTreeMap<u64, Arc<SourceModel>>,
+    /// Objects drawn as proxies that are not in the mesh at all (the merge's bound,
+    /// `generate::MERGE_TRIANGLES`), whatever their shape; their models are read from
+    /// `models` one at a time.
+    pub forced: &'a [ObjectPlacement],
+    /// Where models not in `sources` are read from.
+    pub models: &'a dyn ModelSource,
     /// The triangle budget.
     pub budget: u64,
     /// Where the aggregate is shown.
     pub display: &'a Display,
+}
+
+impl std::fmt::Debug for ProxyInput<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ProxyInput")
+            .field("objects", &self.objects.len())
+            .field("forced", &self.forced.len())
+            .field("budget", &self.budget)
+            .finish_non_exhaustive()
+    }
 }
 
 /// Replaces the objects that lost their shape, then as many more as the budget needs, by
@@ -138,7 +153,16 @@ pub fn apply(mesh: InstancedMesh, input: &ProxyInput<'_>) -> (InstancedMesh, Pro
             report.largest_pixels = report.largest_pixels.max(pixels);
         }
     }
-    if !proxied.iter().any(|&p| p) {
+    report.budget += input.forced.len();
+    if let Some(largest) = input
+        .forced
+        .iter()
+        .map(|o| input.display.object_pixels(o.centre, o.radius))
+        .max_by(f64::total_cmp)
+    {
+        report.largest_pixels = report.largest_pixels.max(largest);
+    }
+    if !proxied.iter().any(|&p| p) && input.forced.is_empty() {
         return (mesh, report);
     }
     // Stage 4: the mesh without the proxied objects' instances, plus one proxy submesh per
@@ -155,12 +179,20 @@ pub fn apply(mesh: InstancedMesh, input: &ProxyInput<'_>) -> (InstancedMesh, Pro
     }
     mesh.retain_submeshes(&used);
     let mut proxy_of: HashMap<u64, Option<usize>> = HashMap::new();
-    for (o, object) in input.objects.iter().enumerate() {
-        if !proxied[o] {
-            continue;
-        }
+    let drawn = input
+        .objects
+        .iter()
+        .zip(&proxied)
+        .filter(|(_, &p)| p)
+        .map(|(o, _)| o)
+        .chain(input.forced);
+    for object in drawn {
         let submesh = *proxy_of.entry(object.model).or_insert_with(|| {
-            let source = input.sources.get(&object.model)?;
+            let source = match input.sources.get(&object.model) {
+                Some(s) => s.clone(),
+                None => input.models.model(object.model).ok()?,
+            };
+            let source = source.as_ref();
             let texel = input.display.nearest_length_of_pixels(1.0) as f32;
             let (mut proxy, texture) = box_proxy(source, texel)?;
             mesh.textures.push(texture);
@@ -488,6 +520,51 @@ mod tests {
         assert!(side[0] > 200 && side[2] < 50, "{side:?}");
         let rim = at(0, 0.99, 0.5);
         assert!(rim[2] > 200, "{rim:?}");
+    }
+
+    #[test]
+    fn objects_kept_out_of_the_merge_are_drawn_as_proxies_read_from_the_models() {
+        let red = Vec4::new(1.0, 0.0, 0.0, 1.0);
+        let block = SourceModel::new(
+            "block".into(),
+            solid(Vec3::ZERO, Vec3::new(2.0, 3.0, 1.0), red),
+            Vec::new(),
+            Vec::new(),
+        );
+        let models = crate::source::InMemoryModels::new(vec![block]);
+        let forced: Vec<ObjectPlacement> = [0.0f32, 10.0]
+            .iter()
+            .map(|&x| ObjectPlacement {
+                model: 0,
+                transform: Affine3A::from_translation(Vec3::new(x, 0.0, 0.0)),
+                centre: Vec3::new(x + 1.0, 1.5, 0.5),
+                radius: 1.9,
+            })
+            .collect();
+        let display = Display::of(
+            Vec3::ZERO,
+            20.0,
+            2.0,
+            &crate::options::AggregateOptions::default(),
+        );
+        let (mesh, report) = apply(
+            InstancedMesh::default(),
+            &ProxyInput {
+                instance_objects: &[],
+                objects: &[],
+                parts: &[],
+                sources: &BTreeMap::new(),
+                forced: &forced,
+                models: &models,
+                budget: 1000,
+                display: &display,
+            },
+        );
+        assert_eq!(report.budget, 2);
+        assert_eq!(mesh.submeshes.len(), 1, "one proxy for the model");
+        assert_eq!(mesh.instances.len(), 2, "placed at both objects");
+        assert_eq!(mesh.textures.len(), 1);
+        mesh.validate().expect("a valid mesh");
     }
 
     #[test]

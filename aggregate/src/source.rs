@@ -95,6 +95,11 @@ pub trait ModelSource: Sync {
     fn hash(&self, model: u64) -> Result<String, AggregateError> {
         Ok(self.model(model)?.hash.clone())
     }
+    /// Triangles the model stores (each submesh once). A source that keeps only some models
+    /// in memory answers this without loading the model.
+    fn triangles(&self, model: u64) -> Result<u64, AggregateError> {
+        Ok(self.model(model)?.mesh.unique_triangle_count())
+    }
     /// The number of a model by content hash, if the world has it.
     fn by_hash(&self, hash: &str) -> Option<u64>;
 }

@@ -83,6 +83,11 @@ pub struct Args {
     /// Folder to write each view's renders (full, cut, difference) into as PNG.
     #[arg(long)]
     pub images: Option<PathBuf>,
+    /// Plan and cost every view and check every aggregate's bounds, but render nothing
+    /// (PSNR, SSIM and holes are left out): for worlds whose full detail does not fit the
+    /// renderer's memory, such as 60,000 distinct buildings.
+    #[arg(long, conflicts_with_all = ["node", "images", "levels_peer"])]
+    pub no_render: bool,
 }
 
 /// One view's figures.
@@ -226,13 +231,17 @@ pub fn measure(args: &Args) -> anyhow::Result<Report> {
         ..Budgets::default()
     };
     let full_entries = world.with_served(|s| plan(s, &table, &everything).entries())?;
-    let full_scene = assets.scene(&full_entries)?;
+    let full_scene = if args.no_render {
+        None
+    } else {
+        Some(assets.scene(&full_entries)?)
+    };
     let full_cost = cost(&full_entries);
     let object_boxes = assets.object_boxes(&full_entries)?;
     eprintln!(
         "full world: {} objects, {} placed submeshes",
         full_entries.len(),
-        full_scene.items()
+        full_scene.as_ref().map_or(0, |s| s.items())
     );
 
     if let Some(node) = args.node {
@@ -259,6 +268,26 @@ pub fn measure(args: &Args) -> anyhow::Result<Report> {
             ..Budgets::default()
         };
         let cut_entries = world.with_served(|s| plan(s, &table, &view).entries())?;
+        let Some(full_scene) = &full_scene else {
+            let report = costed(
+                &world,
+                &mut assets,
+                &name,
+                &camera,
+                &cut_entries,
+                full_cost,
+                &object_boxes,
+            )?;
+            eprintln!(
+                "{name}: {} entries ({} aggregates, {} impostors), {:.1} MB",
+                report.entries,
+                report.aggregates,
+                report.impostors,
+                report.cut.bytes as f64 / 1e6
+            );
+            views.push(report);
+            continue;
+        };
         let flat = if args.levels_peer {
             let flat_view = View {
                 max_pixel_error: 0.0,
@@ -368,6 +397,57 @@ pub fn measure(args: &Args) -> anyhow::Result<Report> {
         max_draw_calls: args.max_draw_calls,
         max_pixel_error: args.max_pixel_error,
         views,
+    })
+}
+
+/// A view's report without rendering: its costs and its aggregates' bounds, with PSNR,
+/// SSIM, pixels off and holes not measured (NaN).
+fn costed(
+    world: &World,
+    assets: &mut Assets<'_>,
+    name: &str,
+    camera: &Camera,
+    cut_entries: &[Entry],
+    full: Cost,
+    object_boxes: &HashMap<u64, Aabb>,
+) -> anyhow::Result<ViewReport> {
+    let ious = world.with_served(|s| assets.ious(s.tree, cut_entries, object_boxes))??;
+    let mut worst: Vec<(String, f64)> = ious.clone();
+    worst.sort_by(|a, b| a.1.total_cmp(&b.1));
+    worst.truncate(5);
+    let mut sorted: Vec<f64> = ious.iter().map(|i| i.1).collect();
+    sorted.sort_by(f64::total_cmp);
+    let objects: Vec<Entry> = cut_entries
+        .iter()
+        .filter(|e| e.kind == EntryKind::Object)
+        .cloned()
+        .collect();
+    Ok(ViewReport {
+        name: name.to_string(),
+        eye: camera.eye.to_array(),
+        psnr: f64::NAN,
+        ssim: f64::NAN,
+        off16: f64::NAN,
+        holes: f64::NAN,
+        full,
+        cut: cost(cut_entries),
+        entries: cut_entries.len(),
+        aggregates: ious.len(),
+        iou_median: sorted.get(sorted.len() / 2).copied().unwrap_or(1.0),
+        iou_min: sorted.first().copied().unwrap_or(1.0),
+        iou_under_0_9: sorted.iter().filter(|&&v| v < 0.9).count(),
+        iou_worst: worst,
+        largest: largest(cut_entries),
+        render_seconds: 0.0,
+        flat: None,
+        meshes_only: None,
+        impostors: cut_entries
+            .iter()
+            .filter(|e| e.kind == EntryKind::Impostor)
+            .count(),
+        against_aggregate: None,
+        objects_alone: cost(&objects),
+        levelled: cut_entries.iter().filter(|e| e.level > 0).count(),
     })
 }
 
@@ -644,6 +724,8 @@ fn cost(entries: &[Entry]) -> Cost {
 struct Assets<'w> {
     world: &'w World,
     prepared: HashMap<String, (Arc<PreparedMesh>, horizon_mesh::Aabb)>,
+    /// Bounds of assets read only for their bounds (not prepared to render).
+    bounds: HashMap<String, horizon_mesh::Aabb>,
 }
 
 impl<'w> Assets<'w> {
@@ -651,7 +733,28 @@ impl<'w> Assets<'w> {
         Self {
             world,
             prepared: HashMap::new(),
+            bounds: HashMap::new(),
         }
+    }
+
+    /// An asset's local bounds, without preparing it to render unless it already is.
+    fn bounds(&mut self, hash: &str) -> anyhow::Result<horizon_mesh::Aabb> {
+        if let Some(p) = self.prepared.get(hash) {
+            return Ok(p.1);
+        }
+        if let Some(b) = self.bounds.get(hash) {
+            return Ok(*b);
+        }
+        let bytes = self
+            .world
+            .blob(hash)?
+            .with_context(|| format!("asset {hash} is not in the world's blobs"))?;
+        let b = import_bytes(&bytes, Format::Glb, None, &ImportOptions::trusted())
+            .with_context(|| format!("asset {hash}"))?
+            .mesh
+            .bounds();
+        self.bounds.insert(hash.to_string(), b);
+        Ok(b)
     }
 
     fn get(&mut self, hash: &str) -> anyhow::Result<(Arc<PreparedMesh>, horizon_mesh::Aabb)> {
@@ -738,7 +841,7 @@ impl<'w> Assets<'w> {
             let id = object_id(&e.id).with_context(|| format!("entry id {}", e.id))?;
             let mut b = Aabb::EMPTY;
             for p in &e.placements {
-                let local = self.get(&p.asset)?.1;
+                let local = self.bounds(&p.asset)?;
                 b = b.union(world_box(&local, &affine(&p.matrix)));
             }
             out.insert(id, b);
@@ -767,7 +870,7 @@ impl<'w> Assets<'w> {
             }
             let mut drawn = Aabb::EMPTY;
             for p in &e.placements {
-                let local = self.get(&p.asset)?.1;
+                let local = self.bounds(&p.asset)?;
                 drawn = drawn.union(world_box(&local, &affine(&p.matrix)));
             }
             out.push((e.id.clone(), iou(&drawn, &covered)));

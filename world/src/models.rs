@@ -25,7 +25,7 @@ pub struct Models {
 }
 
 /// Estimated bytes of prepared models [`Models`] keeps by default (see the module docs).
-pub const MODEL_CACHE_BYTES: usize = 2 << 30;
+pub const MODEL_CACHE_BYTES: usize = 1 << 30;
 
 #[derive(Debug, Default)]
 struct State {
@@ -286,6 +286,17 @@ impl ModelSource for Models {
                 model,
                 reason: e.to_string(),
             })
+    }
+
+    fn triangles(&self, model: u64) -> Result<u64, AggregateError> {
+        let row = self.row(model).map_err(|e| AggregateError::Model {
+            model,
+            reason: e.to_string(),
+        })?;
+        match row.stats.get("triangles_unique").and_then(|t| t.as_u64()) {
+            Some(t) => Ok(t),
+            None => Ok(self.model(model)?.mesh.unique_triangle_count()),
+        }
     }
 
     fn by_hash(&self, hash: &str) -> Option<u64> {
