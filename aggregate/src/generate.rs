@@ -745,7 +745,8 @@ mod tests {
         // Under the bound: everything merges.
         let small = input(vec![at(0, 0.0, 5.0), at(2, 10.0, 1.0)]);
         let (merged, forced) =
-            bound_merge(&small, small.placements.clone(), &BTreeMap::new(), &models).unwrap();
+            bound_merge(&small, small.placements.clone(), &BTreeMap::new(), &models)
+                .expect("bound");
         assert_eq!((merged.len(), forced.len()), (2, 0));
         // Two distinct halves do not fit: the larger on screen merges, the smaller is a proxy;
         // a second placement of a merged model costs nothing more and merges too.
@@ -756,7 +757,7 @@ mod tests {
             at(2, 20.0, 1.0),
         ]);
         let (merged, forced) =
-            bound_merge(&big, big.placements.clone(), &BTreeMap::new(), &models).unwrap();
+            bound_merge(&big, big.placements.clone(), &BTreeMap::new(), &models).expect("bound");
         let merged_models: Vec<u64> = merged.iter().map(|p| p.model).collect();
         assert_eq!(merged_models, vec![1, 1, 2], "{merged:?}");
         assert_eq!(forced.len(), 1);
@@ -765,7 +766,7 @@ mod tests {
         let mut versions = BTreeMap::new();
         versions.insert((0, 0), Arc::new(model("a'", 100).mesh.submeshes[0].clone()));
         let (merged, forced) =
-            bound_merge(&big, big.placements.clone(), &versions, &models).unwrap();
+            bound_merge(&big, big.placements.clone(), &versions, &models).expect("bound");
         assert_eq!((merged.len(), forced.len()), (4, 0));
     }
 
@@ -774,7 +775,7 @@ mod tests {
         let models = InMemoryModels::new(vec![model("a", MERGE_TRIANGLES as usize + 1)]);
         let one = input(vec![at(0, 0.0, 2.0)]);
         let (merged, forced) =
-            bound_merge(&one, one.placements.clone(), &BTreeMap::new(), &models).unwrap();
+            bound_merge(&one, one.placements.clone(), &BTreeMap::new(), &models).expect("bound");
         assert_eq!((merged.len(), forced.len()), (1, 0));
     }
 }
