@@ -279,10 +279,10 @@ fn build(
                     options.aggregate.method,
                 );
                 let read_children = read.elapsed().as_secs_f64();
-                let input = node_input(bvh, node, children, &options.aggregate, atlas)?;
+                let mut input = node_input(bvh, node, children, &options.aggregate, atlas)?;
                 let generated = match options.aggregate.method {
                     Method::Optimized => {
-                        generate_with(&input, models, &table, &options.aggregate, &textures)
+                        generate_with(&mut input, models, &table, &options.aggregate, &textures)
                     }
                     #[cfg(feature = "baseline")]
                     Method::Unoptimized => {

@@ -245,7 +245,7 @@ pub struct NodeOutput {
 /// Builds one node's aggregate by the optimised pipeline (the rebuild runs the unoptimised
 /// baseline instead where `options.method` asks for it).
 pub fn generate(
-    input: &NodeInput,
+    input: &mut NodeInput,
     models: &dyn ModelSource,
     table: &Table1,
     options: &AggregateOptions,
@@ -254,9 +254,10 @@ pub fn generate(
 }
 
 /// [`generate`], decoding the textures it atlases through `textures`, which the aggregates
-/// of one build share (the same bytes come out either way).
+/// of one build share (the same bytes come out either way). Takes the children's handoffs
+/// out of `input`, so that what the merge does not use is freed as soon as it is known.
 pub fn generate_with(
-    input: &NodeInput,
+    input: &mut NodeInput,
     models: &dyn ModelSource,
     table: &Table1,
     options: &AggregateOptions,
@@ -270,13 +271,17 @@ pub fn generate_with(
         ..NodeStats::default()
     };
     // Stage 1, gather: the coarsest version of every model submesh among the children.
-    let versions = coarsest_versions(&input.children);
+    let mut versions = coarsest_versions(&std::mem::take(&mut input.children));
     // Stage 2, cull: objects under `cull_pixels` at the nearest display distance cannot show.
     let kept = cull(input, options);
     stats.culled = input.placements.len() - kept.len();
     // Stage 2b, bound the merge: past MERGE_TRIANGLES, the smallest go straight to proxies.
     let (kept, forced) = bound_merge(input, kept, &versions, models)?;
     stats.proxied_merge = forced.len();
+    if !forced.is_empty() {
+        let merged: std::collections::BTreeSet<u64> = kept.iter().map(|p| p.model).collect();
+        versions.retain(|(model, _), _| merged.contains(model));
+    }
     // Stage 3, dedup (section 5.1).
     let sources = load_models(kept.iter().map(|p| p.model), models)?;
     stats.stages.gather = lap.lap();

@@ -23,12 +23,13 @@
 //! Proxies are this aggregate's only: the handoff to the parent keeps the simplified parts,
 //! and the parent decides again at its own budget.
 
-use std::collections::{BTreeMap, HashMap};
+use std::collections::{BTreeMap, HashMap, HashSet};
 use std::sync::Arc;
 
 use glam::{Affine3A, Vec2, Vec3, Vec4};
 use horizon_impostor::{to_srgb, PreparedMesh, SceneBuilder};
 use horizon_mesh::{Instance, InstancedMesh, Material, Submesh, Texture, TextureRef, Wrap};
+use rayon::prelude::*;
 
 use crate::budget::Display;
 use crate::generate::PartKey;
@@ -178,23 +179,37 @@ pub fn apply(mesh: InstancedMesh, input: &ProxyInput<'_>) -> (InstancedMesh, Pro
         used[inst.submesh] = true;
     }
     mesh.retain_submeshes(&used);
-    let mut proxy_of: HashMap<u64, Option<usize>> = HashMap::new();
-    let drawn = input
+    let drawn: Vec<&ObjectPlacement> = input
         .objects
         .iter()
         .zip(&proxied)
         .filter(|(_, &p)| p)
         .map(|(o, _)| o)
-        .chain(input.forced);
-    for object in drawn {
-        let submesh = *proxy_of.entry(object.model).or_insert_with(|| {
-            let source = match input.sources.get(&object.model) {
+        .chain(input.forced)
+        .collect();
+    // The proxies of the models drawn, in parallel (each ray-casts its model's faces; at an
+    // upper node thousands of them), in order of first use.
+    let mut models: Vec<u64> = Vec::new();
+    let mut seen: HashSet<u64> = HashSet::new();
+    for object in &drawn {
+        if seen.insert(object.model) {
+            models.push(object.model);
+        }
+    }
+    let texel = input.display.nearest_length_of_pixels(1.0) as f32;
+    let made: Vec<Option<(Submesh, Texture)>> = models
+        .par_iter()
+        .map(|&model| {
+            let source = match input.sources.get(&model) {
                 Some(s) => s.clone(),
-                None => input.models.model(object.model).ok()?,
+                None => input.models.model(model).ok()?,
             };
-            let source = source.as_ref();
-            let texel = input.display.nearest_length_of_pixels(1.0) as f32;
-            let (mut proxy, texture) = box_proxy(source, texel)?;
+            box_proxy(&source, texel)
+        })
+        .collect();
+    let mut proxy_of: HashMap<u64, Option<usize>> = HashMap::new();
+    for (model, proxy) in models.into_iter().zip(made) {
+        let submesh = proxy.map(|(mut proxy, texture)| {
             mesh.textures.push(texture);
             mesh.materials.push(Material {
                 name: Some("proxy".into()),
@@ -208,9 +223,12 @@ pub fn apply(mesh: InstancedMesh, input: &ProxyInput<'_>) -> (InstancedMesh, Pro
             });
             proxy.material = Some(mesh.materials.len() - 1);
             mesh.submeshes.push(proxy);
-            Some(mesh.submeshes.len() - 1)
+            mesh.submeshes.len() - 1
         });
-        if let Some(submesh) = submesh {
+        proxy_of.insert(model, submesh);
+    }
+    for object in drawn {
+        if let Some(&Some(submesh)) = proxy_of.get(&object.model) {
             mesh.instances.push(Instance {
                 submesh,
                 transform: object.transform,

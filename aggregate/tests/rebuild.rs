@@ -572,7 +572,7 @@ fn a_part_missing_from_the_children_comes_from_its_source_model() {
     // A child handed over the box part alone.
     let mut versions = BTreeMap::new();
     versions.insert((0u64, 0u32), Arc::new(mesh.submeshes[0].clone()));
-    let input = NodeInput {
+    let mut input = NodeInput {
         node: 1,
         display: Display::of(Vec3::new(1.5, 1.0, 0.0), 3.5, 2.0, &options),
         outer_radius: 5.5,
@@ -580,7 +580,7 @@ fn a_part_missing_from_the_children_comes_from_its_source_model() {
         children: vec![Arc::new(Handoff::Versions(versions))],
         atlas: false,
     };
-    let out = generate(&input, &models, &Table1::calibrated(), &options).expect("generate");
+    let out = generate(&mut input, &models, &Table1::calibrated(), &options).expect("generate");
     assert_eq!(
         out.stats.culled + out.stats.culled_parts,
         0,
@@ -718,7 +718,7 @@ fn an_aggregate_of_distinct_seamed_objects_over_its_budget_keeps_every_silhouett
         dedup: false,
         ..AggregateOptions::default()
     };
-    let input = NodeInput {
+    let mut input = NodeInput {
         node: 1,
         display: Display::of(Vec3::new(22.5, 0.0, 22.5), 32.0, 24.0, &options),
         outer_radius: 34.0,
@@ -726,7 +726,7 @@ fn an_aggregate_of_distinct_seamed_objects_over_its_budget_keeps_every_silhouett
         children: Vec::new(),
         atlas: true,
     };
-    let out = generate(&input, &models, &Table1::calibrated(), &options).expect("generate");
+    let out = generate(&mut input, &models, &Table1::calibrated(), &options).expect("generate");
     let s = &out.stats;
     assert_eq!((s.culled, s.culled_parts), (0, 0), "{s:?}");
     assert!(s.triangles_in > s.budget, "{s:?}");
