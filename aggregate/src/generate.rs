@@ -432,17 +432,31 @@ pub fn generate_with(
     stats.stages.proxy = lap.lap();
     // Stage 7, atlas (section 7) and encode.
     let out = if input.atlas {
-        let atlas_options = AtlasOptions {
+        let mut atlas_options = AtlasOptions {
             max_bytes: options.atlas_bytes,
             max_side: input.display.atlas_side(options),
             ..AtlasOptions::default()
         };
-        build_atlas_with(&simplified, &atlas_options, textures)
-            .map_err(|source| AggregateError::Atlas {
-                node: input.node,
-                source,
-            })?
-            .0
+        // Charts that do not fit the display's side even at a texel each (thousands of box
+        // proxies at an upper node) get a larger atlas, up to MAX_ATLAS_SIDE, its byte
+        // budget grown with its area.
+        loop {
+            match build_atlas_with(&simplified, &atlas_options, textures) {
+                Ok((atlased, _)) => break atlased,
+                Err(horizon_atlas::AtlasError::DoesNotFit { .. })
+                    if atlas_options.max_side < MAX_ATLAS_SIDE =>
+                {
+                    atlas_options.max_side *= 2;
+                    atlas_options.max_bytes = atlas_options.max_bytes.saturating_mul(4);
+                }
+                Err(source) => {
+                    return Err(AggregateError::Atlas {
+                        node: input.node,
+                        source,
+                    })
+                }
+            }
+        }
     } else {
         simplified
     };
@@ -513,6 +527,10 @@ fn coarsest_versions(children: &[Arc<Handoff>]) -> BTreeMap<PartKey, Arc<Submesh
     }
     out
 }
+
+/// The largest atlas side an aggregate grows to when its charts do not fit the side its
+/// display asks for (`Display::atlas_side`).
+pub const MAX_ATLAS_SIDE: u32 = 4096;
 
 /// Unique triangles a node's merge may hold (what IAS loads: its memory grows with them, about
 /// a kilobyte each). On a world of distinct models whose parts IAS cannot simplify (seams,
