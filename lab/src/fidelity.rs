@@ -942,6 +942,15 @@ fn difference(a: &horizon_impostor::Frame, b: &horizon_impostor::Frame) -> image
     out
 }
 
+/// A figure as text, or "-" where it was not measured (`--no-render`).
+fn measured(x: f64, show: impl Fn(f64) -> String) -> String {
+    if x.is_nan() {
+        "-".into()
+    } else {
+        show(x)
+    }
+}
+
 fn print_table(r: &Report) -> anyhow::Result<()> {
     outln!(
         "{}: {} objects, {}x{} at {} rays per pixel, cut at {} sr, at most {} entries{}",
@@ -960,12 +969,12 @@ fn print_table(r: &Report) -> anyhow::Result<()> {
     outln!("|---|---|---|---|---|---|---|---|---|---|")?;
     for v in &r.views {
         outln!(
-            "| {} | {:.1} | {:.4} | {:.2}% | {:.3}% | {} / {} ({:.2}x) | {} / {} ({:.2}x) | {} / {} ({:.2}x) | {} ({}) | {:.3} / {:.3} / {} |",
+            "| {} | {} | {} | {} | {} | {} / {} ({:.2}x) | {} / {} ({:.2}x) | {} / {} ({:.2}x) | {} ({}) | {:.3} / {:.3} / {} |",
             v.name,
-            v.psnr,
-            v.ssim,
-            v.off16 * 100.0,
-            v.holes * 100.0,
+            measured(v.psnr, |x| format!("{x:.1}")),
+            measured(v.ssim, |x| format!("{x:.4}")),
+            measured(v.off16, |x| format!("{:.2}%", x * 100.0)),
+            measured(v.holes, |x| format!("{:.3}%", x * 100.0)),
             mb(v.full.bytes),
             mb(v.cut.bytes),
             ratio(v.cut.bytes, v.full.bytes),
