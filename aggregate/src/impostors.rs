@@ -14,7 +14,8 @@
 //!    ([`Orthoview::render`]), a ray per pixel; coverage below full comes from compositing. A child's orthoviews come from this build or, reused, from
 //!    their stored images.
 //! 4. **encode**: three lossless PNGs per direction (colour, 16-bit depth, octahedral
-//!    normals), content-addressed through the store, committed once.
+//!    normals), content-addressed through the store, committed level by level; a level's
+//!    orthoviews past [`KEPT_VIEW_BYTES`] are read back from them by the level above.
 //!
 //! A node's q and the directions: `horizon_impostor::node_resolution` (pixel-exact from where
 //! the cut would first draw the node's aggregate) and `WORLD_DIRECTIONS`, at the options'
@@ -52,6 +53,10 @@ pub const BYTES_PER_PIXEL: f64 = 0.5;
 
 /// Decoded meshes kept for ray casting, as an estimate of their bytes.
 const PREPARED_CACHE_BYTES: usize = 2 << 30;
+
+/// Decoded orthoviews of one tree level kept in memory for the level above (8 bytes a
+/// pixel); the rest are read back from their images.
+const KEPT_VIEW_BYTES: usize = 512 << 20;
 
 /// Which nodes of a build get impostors.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
@@ -277,7 +282,22 @@ pub fn build_impostors(
         report.built += made.len();
         report.rendered += made.iter().filter(|m| m.2).count();
         out.extend(encoded);
-        below = made.into_iter().map(|(n, v, _)| (n, v)).collect();
+        // The level's images become readable, so that the parents read back what is not
+        // kept in memory: past `KEPT_VIEW_BYTES` (on 60,000 distinct buildings, the leaves'
+        // orthoviews alone are 4 GB).
+        store.commit()?;
+        let mut kept = 0usize;
+        below = made
+            .into_iter()
+            .filter(|(_, views, _)| {
+                kept += views
+                    .iter()
+                    .map(|v| (v.width * v.height) as usize * 8)
+                    .sum::<usize>();
+                kept <= KEPT_VIEW_BYTES
+            })
+            .map(|(n, v, _)| (n, v))
+            .collect();
     }
     store.commit()?;
     report.nodes = out.len();
