@@ -338,44 +338,23 @@ pub fn measure(args: &Args) -> anyhow::Result<Report> {
             cut.save_png(&dir.join(format!("{name}-cut.png")))?;
             difference(&full, &cut).save(dir.join(format!("{name}-diff.png")))?;
         }
-        let ious = world.with_served(|s| assets.ious(s.tree, &cut_entries, &object_boxes))??;
-        let mut worst: Vec<(String, f64)> = ious.clone();
-        worst.sort_by(|a, b| a.1.total_cmp(&b.1));
-        worst.truncate(5);
-        let mut sorted: Vec<f64> = ious.iter().map(|i| i.1).collect();
-        sorted.sort_by(f64::total_cmp);
         let report = ViewReport {
-            name: name.clone(),
-            eye: camera.eye.to_array(),
             psnr,
             ssim,
             off16,
             holes,
-            full: full_cost,
-            cut: cost(&cut_entries),
-            entries: cut_entries.len(),
-            aggregates: ious.len(),
-            iou_median: sorted.get(sorted.len() / 2).copied().unwrap_or(1.0),
-            iou_min: sorted.first().copied().unwrap_or(1.0),
-            iou_under_0_9: sorted.iter().filter(|&&v| v < 0.9).count(),
-            iou_worst: worst,
-            largest: largest(&cut_entries),
             render_seconds,
             flat,
             meshes_only,
-            impostors: cut_entries
-                .iter()
-                .filter(|e| e.kind == EntryKind::Impostor)
-                .count(),
-            against_aggregate: None,
-            objects_alone: cost(
-                &cut_entries
-                    .iter()
-                    .filter(|e| e.kind == EntryKind::Object)
-                    .cloned()
-                    .collect::<Vec<_>>(),
-            ),
-            levelled: cut_entries.iter().filter(|e| e.level > 0).count(),
+            ..costed(
+                &world,
+                &mut assets,
+                &name,
+                &camera,
+                &cut_entries,
+                full_cost,
+                &object_boxes,
+            )?
         };
         eprintln!(
             "{name}: PSNR {psnr:.1} dB, SSIM {ssim:.4}, holes {:.3}%, {} entries ({} aggregates), {:.1} s",
@@ -400,8 +379,8 @@ pub fn measure(args: &Args) -> anyhow::Result<Report> {
     })
 }
 
-/// A view's report without rendering: its costs and its aggregates' bounds, with PSNR,
-/// SSIM, pixels off and holes not measured (NaN).
+/// A view's report without its images: its costs and its aggregates' bounds, with PSNR,
+/// SSIM, pixels off and holes not measured (NaN) until the caller renders.
 fn costed(
     world: &World,
     assets: &mut Assets<'_>,

@@ -155,6 +155,13 @@ fn fidelity_of_a_small_world() {
             "{v}"
         );
     }
+    // Without rendering: the same cuts, costs and bounds, and no image figures.
+    let costed = run(&["--street", "1", "--no-render"]);
+    for (v, w) in views.iter().zip(costed["views"].as_array().expect("views")) {
+        assert_eq!((&v["cut"], &v["full"]), (&w["cut"], &w["full"]), "{w}");
+        assert_eq!(v["iou_min"], w["iou_min"], "{w}");
+        assert!(w["psnr"].is_null() && w["holes"].is_null(), "{w}");
+    }
     // A cut that shows every object as itself draws exactly the full world.
     let every = run(&[
         "--street",
