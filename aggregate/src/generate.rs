@@ -1,6 +1,6 @@
 //! One node's aggregate (core paper sections 5 to 7): gather the children's representations,
-//! cull what cannot show, bound what enters the merge ([`MERGE_TRIANGLES`]), dedup near-duplicates (Table 1), merge into one instanced mesh,
-//! simplify with IAS to the node's budget, draw the objects whose simplified parts lost their
+//! cull what cannot show, bound what enters the merge ([`MERGE_TRIANGLES`]), dedup
+//! near-duplicates (Table 1), merge into one instanced mesh, simplify with IAS to the node's budget, draw the objects whose simplified parts lost their
 //! shape (and, over the budget, the smallest others) as box proxies (`proxy.rs`), atlas, merge the parts placed alike and bake the
 //! placements that cost less written out than instanced into one submesh
 //! (`InstancedMesh::merge_coplaced_submeshes`, `bake_cheap_instances`: fewer draw calls and

@@ -268,24 +268,24 @@ pub fn measure(args: &Args) -> anyhow::Result<Report> {
             ..Budgets::default()
         };
         let cut_entries = world.with_served(|s| plan(s, &table, &view).entries())?;
+        let costs = costed(
+            &world,
+            &mut assets,
+            &name,
+            &camera,
+            &cut_entries,
+            full_cost,
+            &object_boxes,
+        )?;
         let Some(full_scene) = &full_scene else {
-            let report = costed(
-                &world,
-                &mut assets,
-                &name,
-                &camera,
-                &cut_entries,
-                full_cost,
-                &object_boxes,
-            )?;
             eprintln!(
                 "{name}: {} entries ({} aggregates, {} impostors), {:.1} MB",
-                report.entries,
-                report.aggregates,
-                report.impostors,
-                report.cut.bytes as f64 / 1e6
+                costs.entries,
+                costs.aggregates,
+                costs.impostors,
+                costs.cut.bytes as f64 / 1e6
             );
-            views.push(report);
+            views.push(costs);
             continue;
         };
         let flat = if args.levels_peer {
@@ -346,15 +346,7 @@ pub fn measure(args: &Args) -> anyhow::Result<Report> {
             render_seconds,
             flat,
             meshes_only,
-            ..costed(
-                &world,
-                &mut assets,
-                &name,
-                &camera,
-                &cut_entries,
-                full_cost,
-                &object_boxes,
-            )?
+            ..costs
         };
         eprintln!(
             "{name}: PSNR {psnr:.1} dB, SSIM {ssim:.4}, holes {:.3}%, {} entries ({} aggregates), {:.1} s",
@@ -724,29 +716,29 @@ impl<'w> Assets<'w> {
         if let Some(b) = self.bounds.get(hash) {
             return Ok(*b);
         }
+        let b = self.import(hash)?.bounds();
+        self.bounds.insert(hash.to_string(), b);
+        Ok(b)
+    }
+
+    /// An asset read from the world's blobs.
+    fn import(&self, hash: &str) -> anyhow::Result<horizon_mesh::InstancedMesh> {
         let bytes = self
             .world
             .blob(hash)?
             .with_context(|| format!("asset {hash} is not in the world's blobs"))?;
-        let b = import_bytes(&bytes, Format::Glb, None, &ImportOptions::trusted())
-            .with_context(|| format!("asset {hash}"))?
-            .mesh
-            .bounds();
-        self.bounds.insert(hash.to_string(), b);
-        Ok(b)
+        Ok(
+            import_bytes(&bytes, Format::Glb, None, &ImportOptions::trusted())
+                .with_context(|| format!("asset {hash}"))?
+                .mesh,
+        )
     }
 
     fn get(&mut self, hash: &str) -> anyhow::Result<(Arc<PreparedMesh>, horizon_mesh::Aabb)> {
         if let Some(p) = self.prepared.get(hash) {
             return Ok(p.clone());
         }
-        let bytes = self
-            .world
-            .blob(hash)?
-            .with_context(|| format!("asset {hash} is not in the world's blobs"))?;
-        let mesh = import_bytes(&bytes, Format::Glb, None, &ImportOptions::trusted())
-            .with_context(|| format!("asset {hash}"))?
-            .mesh;
+        let mesh = self.import(hash)?;
         let made = (Arc::new(PreparedMesh::new(&mesh)), mesh.bounds());
         self.prepared.insert(hash.to_string(), made.clone());
         Ok(made)
