@@ -75,6 +75,7 @@ pub(crate) fn cut_query(view: &View) -> Vec<(&'static str, String)> {
         ("pixel_solid_angle", view.pixel_solid_angle.to_string()),
         ("max_pixel_error", view.max_pixel_error.to_string()),
         ("impostors", view.impostors.to_string()),
+        ("instances", view.instances.to_string()),
     ];
     let b = &view.budgets;
     for (name, value) in [
@@ -188,6 +189,7 @@ mod tests {
             pixel_solid_angle: 3.0e-7,
             max_pixel_error: 0.5,
             impostors: false,
+            instances: false,
             budgets: Budgets {
                 max_entries: Some(10),
                 max_triangles: Some(7),
@@ -204,6 +206,7 @@ mod tests {
                 "pixel_solid_angle",
                 "max_pixel_error",
                 "impostors",
+                "instances",
                 "max_entries",
                 "max_triangles"
             ]

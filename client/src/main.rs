@@ -149,6 +149,9 @@ struct ViewArgs {
     /// Ask for no orthoview impostors (far nodes as their aggregates).
     #[arg(long)]
     no_impostors: bool,
+    /// Ask for no instances entries (every node as its aggregate or impostor).
+    #[arg(long)]
+    no_instances: bool,
     /// Most entries.
     #[arg(long)]
     max_entries: Option<u64>,
@@ -180,6 +183,7 @@ impl ViewArgs {
             view.max_pixel_error = e;
         }
         view.impostors = !self.no_impostors;
+        view.instances = !self.no_instances;
         view.budgets = Budgets {
             max_entries: self.max_entries,
             max_bytes: self.max_bytes,
@@ -273,6 +277,7 @@ async fn cut(url: &str, view: &View, json: bool) -> anyhow::Result<()> {
             EntryKind::Object => "object",
             EntryKind::Aggregate => "aggregate",
             EntryKind::Impostor => "impostor",
+            EntryKind::Instances => "instances",
         };
         let slot = by_kind.entry(kind).or_default();
         slot.0 += 1;

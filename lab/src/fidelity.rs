@@ -71,6 +71,11 @@ pub struct Args {
     /// alone, at the impostor's handover distance for this image's pixel.
     #[arg(long)]
     pub impostors: bool,
+    /// Also plan, render and measure each view's cut without instances entries (every node
+    /// as its aggregate or impostor), the peer the reuse-aware cut is compared with in the
+    /// same run.
+    #[arg(long)]
+    pub instances_peer: bool,
     /// Instead of seeded views: render node N's aggregate alone against the objects it covers
     /// alone, from above at 45 degrees and at the node's nearest display distance (times
     /// `--node-distance`).
@@ -130,6 +135,10 @@ pub struct ViewReport {
     pub flat: Option<FlatReport>,
     /// The same cut without impostors, with `--impostors`.
     pub meshes_only: Option<FlatReport>,
+    /// The same cut without instances entries, with `--instances-peer`.
+    pub aggregates_only: Option<FlatReport>,
+    /// Instances entries of the cut.
+    pub instance_entries: usize,
     /// Impostor entries of the cut.
     pub impostors: usize,
     /// With `--node` and `--impostors`: PSNR of the node's impostor against its aggregate.
@@ -220,7 +229,7 @@ pub fn measure(args: &Args) -> anyhow::Result<Report> {
         bvh.node(bvh.root()).map(|n| n.aabb())
     })?;
     let bounds = bounds.context("the world has no objects")?;
-    let mut assets = Assets::new(&world);
+    let mut assets = Assets::new(&world, &table);
 
     // The full world: a cut that refines everything.
     let mut everything = View::at([0.0; 3]);
@@ -236,7 +245,7 @@ pub fn measure(args: &Args) -> anyhow::Result<Report> {
     } else {
         Some(assets.scene(&full_entries)?)
     };
-    let full_cost = cost(&full_entries);
+    let full_cost = assets.cost(&full_entries);
     let object_boxes = assets.object_boxes(&full_entries)?;
     eprintln!(
         "full world: {} objects, {} placed submeshes",
@@ -268,7 +277,16 @@ pub fn measure(args: &Args) -> anyhow::Result<Report> {
             ..Budgets::default()
         };
         let cut_entries = world.with_served(|s| plan(s, &table, &view).entries())?;
-        let costs = costed(
+        let plain_entries = if args.instances_peer {
+            let plain = View {
+                instances: false,
+                ..view
+            };
+            Some(world.with_served(|s| plan(s, &table, &plain).entries())?)
+        } else {
+            None
+        };
+        let mut costs = costed(
             &world,
             &mut assets,
             &name,
@@ -278,6 +296,12 @@ pub fn measure(args: &Args) -> anyhow::Result<Report> {
             &object_boxes,
         )?;
         let Some(full_scene) = &full_scene else {
+            costs.aggregates_only = plain_entries.map(|e| FlatReport {
+                psnr: f64::NAN,
+                ssim: f64::NAN,
+                holes: f64::NAN,
+                cost: assets.cost(&e),
+            });
             eprintln!(
                 "{name}: {} entries ({} aggregates, {} impostors), {:.1} MB",
                 costs.entries,
@@ -310,6 +334,13 @@ pub fn measure(args: &Args) -> anyhow::Result<Report> {
         } else {
             None
         };
+        let aggregates_only = match plain_entries {
+            Some(entries) => {
+                let frame = assets.scene(&entries)?.render(&camera, args.samples);
+                Some((entries, frame))
+            }
+            None => None,
+        };
         let cut_scene = assets.scene(&cut_entries)?;
         let started = Instant::now();
         let full = full_scene.render(&camera, args.samples);
@@ -327,11 +358,12 @@ pub fn measure(args: &Args) -> anyhow::Result<Report> {
                 psnr: c.psnr,
                 ssim: c.ssim,
                 holes: c.holes,
-                cost: cost(&entries),
+                cost: assets.cost(&entries),
             }
         };
         let flat = flat.map(peer);
         let meshes_only = meshes_only.map(peer);
+        let aggregates_only = aggregates_only.map(peer);
         if let Some(dir) = &args.images {
             std::fs::create_dir_all(dir)?;
             full.save_png(&dir.join(format!("{name}-full.png")))?;
@@ -346,6 +378,7 @@ pub fn measure(args: &Args) -> anyhow::Result<Report> {
             render_seconds,
             flat,
             meshes_only,
+            aggregates_only,
             ..costs
         };
         eprintln!(
@@ -401,7 +434,7 @@ fn costed(
         off16: f64::NAN,
         holes: f64::NAN,
         full,
-        cut: cost(cut_entries),
+        cut: assets.cost(cut_entries),
         entries: cut_entries.len(),
         aggregates: ious.len(),
         iou_median: sorted.get(sorted.len() / 2).copied().unwrap_or(1.0),
@@ -412,12 +445,17 @@ fn costed(
         render_seconds: 0.0,
         flat: None,
         meshes_only: None,
+        aggregates_only: None,
+        instance_entries: cut_entries
+            .iter()
+            .filter(|e| e.kind == EntryKind::Instances)
+            .count(),
         impostors: cut_entries
             .iter()
             .filter(|e| e.kind == EntryKind::Impostor)
             .count(),
         against_aggregate: None,
-        objects_alone: cost(&objects),
+        objects_alone: assets.cost(&objects),
         levelled: cut_entries.iter().filter(|e| e.level > 0).count(),
     })
 }
@@ -556,7 +594,7 @@ fn focus(
                 psnr: c.psnr,
                 ssim: c.ssim,
                 holes: c.holes,
-                cost: cost(entries),
+                cost: assets.cost(entries),
             })
         }
         None => None,
@@ -589,8 +627,8 @@ fn focus(
             ssim: c.ssim,
             off16: c.off16,
             holes: c.holes,
-            full: cost(&objects),
-            cut: cost(&drawn),
+            full: assets.cost(&objects),
+            cut: assets.cost(&drawn),
             entries: 1,
             aggregates: 1,
             iou_median: iou,
@@ -601,6 +639,8 @@ fn focus(
             render_seconds,
             flat: None,
             meshes_only,
+            aggregates_only: None,
+            instance_entries: 0,
             impostors: usize::from(impostor.is_some()),
             against_aggregate,
             objects_alone: Cost::default(),
@@ -667,45 +707,62 @@ fn largest(entries: &[Entry]) -> Vec<(String, u64)> {
     out
 }
 
-/// Costs of a set of entries: unique assets' bytes and draw calls, every entry's triangles.
-fn cost(entries: &[Entry]) -> Cost {
-    let mut seen = HashSet::new();
-    let mut out = Cost::default();
-    for e in entries {
-        out.triangles += e.triangles;
-        // A preview (an object's coarsest level, for progressive loading) is not what the
-        // entry draws once loaded: it is left out, as the entry's `bytes` leave it out.
-        let fresh: Vec<_> = e
-            .assets
-            .iter()
-            .filter(|a| a.role != horizon_protocol::AssetRole::Preview)
-            .filter(|a| seen.insert(a.hash.clone()))
-            .collect();
-        out.bytes += fresh.iter().map(|a| a.bytes).sum::<u64>();
-        // An entry's draw calls are its assets' submeshes; an asset already drawn adds no
-        // call, its placements join the same instanced draw.
-        if !fresh.is_empty() {
-            out.draw_calls += e.draw_calls;
-        }
-    }
-    out
-}
-
 /// Prepared assets by hash, loaded from the world's blobs on first use.
 struct Assets<'w> {
     world: &'w World,
+    /// Draw calls of every model level, by hash (an instances entry's draw calls are its
+    /// assets', some of which other entries may already draw).
+    calls: HashMap<String, u64>,
     prepared: HashMap<String, (Arc<PreparedMesh>, horizon_mesh::Aabb)>,
     /// Bounds of assets read only for their bounds (not prepared to render).
     bounds: HashMap<String, horizon_mesh::Aabb>,
 }
 
 impl<'w> Assets<'w> {
-    fn new(world: &'w World) -> Self {
+    fn new(world: &'w World, table: &AssetTable) -> Self {
+        let calls = table
+            .models()
+            .iter()
+            .flatten()
+            .flat_map(|m| m.levels.iter().map(|l| (l.hash.clone(), l.draw_calls)))
+            .collect();
         Self {
             world,
+            calls,
             prepared: HashMap::new(),
             bounds: HashMap::new(),
         }
+    }
+
+    /// Costs of a set of entries: unique assets' bytes and draw calls, every entry's
+    /// triangles.
+    fn cost(&self, entries: &[Entry]) -> Cost {
+        let mut seen = HashSet::new();
+        let mut out = Cost::default();
+        for e in entries {
+            out.triangles += e.triangles;
+            // A preview (an object's coarsest level, for progressive loading) is not what the
+            // entry draws once loaded: it is left out, as the entry's `bytes` leave it out.
+            let fresh: Vec<_> = e
+                .assets
+                .iter()
+                .filter(|a| a.role != horizon_protocol::AssetRole::Preview)
+                .filter(|a| seen.insert(a.hash.clone()))
+                .collect();
+            out.bytes += fresh.iter().map(|a| a.bytes).sum::<u64>();
+            // An entry's draw calls are its assets' submeshes; an asset already drawn adds
+            // no call, its placements join the same instanced draw. Instances name several
+            // assets, each with its own calls.
+            if e.kind == EntryKind::Instances {
+                out.draw_calls += fresh
+                    .iter()
+                    .map(|a| self.calls.get(&a.hash).copied().unwrap_or(1))
+                    .sum::<u64>();
+            } else if !fresh.is_empty() {
+                out.draw_calls += e.draw_calls;
+            }
+        }
+        out
     }
 
     /// An asset's local bounds, without preparing it to render unless it already is.
@@ -936,11 +993,11 @@ fn print_table(r: &Report) -> anyhow::Result<()> {
             .map_or(String::new(), |d| format!(", at most {d} draw calls"))
     )?;
     outln!()?;
-    outln!("| view | PSNR dB | SSIM | off >16 | holes | download full / cut | draw calls full / cut | triangles full / cut | entries (aggregates) | aggregate IoU median / min / < 0.9 |")?;
+    outln!("| view | PSNR dB | SSIM | off >16 | holes | download full / cut | draw calls full / cut | triangles full / cut | entries (aggregates, instances) | aggregate IoU median / min / < 0.9 |")?;
     outln!("|---|---|---|---|---|---|---|---|---|---|")?;
     for v in &r.views {
         outln!(
-            "| {} | {} | {} | {} | {} | {} / {} ({:.2}x) | {} / {} ({:.2}x) | {} / {} ({:.2}x) | {} ({}) | {:.3} / {:.3} / {} |",
+            "| {} | {} | {} | {} | {} | {} / {} ({:.2}x) | {} / {} ({:.2}x) | {} / {} ({:.2}x) | {} ({}, {}) | {:.3} / {:.3} / {} |",
             v.name,
             measured(v.psnr, |x| format!("{x:.1}")),
             measured(v.ssim, |x| format!("{x:.4}")),
@@ -957,6 +1014,7 @@ fn print_table(r: &Report) -> anyhow::Result<()> {
             ratio(v.cut.triangles, v.full.triangles),
             v.entries,
             v.aggregates,
+            v.instance_entries,
             v.iou_median,
             v.iou_min,
             v.iou_under_0_9
@@ -990,6 +1048,39 @@ fn print_table(r: &Report) -> anyhow::Result<()> {
                 v.cut.triangles,
                 ratio(v.cut.triangles, f.cost.triangles),
                 v.levelled,
+                v.entries
+            )?;
+        }
+    }
+    if r.views.iter().any(|v| v.aggregates_only.is_some()) {
+        outln!()?;
+        outln!("Reuse-aware cut (instances entries) against the same cut without them (every node as its aggregate), both against the full world:")?;
+        outln!()?;
+        outln!("| view | download without / with instances | draw calls without / with | triangles without / with | PSNR dB without / with | SSIM without / with | holes without / with | instances entries |")?;
+        outln!("|---|---|---|---|---|---|---|---|")?;
+        for v in &r.views {
+            let Some(f) = &v.aggregates_only else {
+                continue;
+            };
+            outln!(
+                "| {} | {} / {} ({:.3}x) | {} / {} ({:.2}x) | {} / {} ({:.2}x) | {} / {} | {} / {} | {} / {} | {} of {} |",
+                v.name,
+                mb(f.cost.bytes),
+                mb(v.cut.bytes),
+                ratio(v.cut.bytes, f.cost.bytes),
+                f.cost.draw_calls,
+                v.cut.draw_calls,
+                ratio(v.cut.draw_calls, f.cost.draw_calls),
+                f.cost.triangles,
+                v.cut.triangles,
+                ratio(v.cut.triangles, f.cost.triangles),
+                measured(f.psnr, |x| format!("{x:.1}")),
+                measured(v.psnr, |x| format!("{x:.1}")),
+                measured(f.ssim, |x| format!("{x:.4}")),
+                measured(v.ssim, |x| format!("{x:.4}")),
+                measured(f.holes, |x| format!("{:.3}%", x * 100.0)),
+                measured(v.holes, |x| format!("{:.3}%", x * 100.0)),
+                v.instance_entries,
                 v.entries
             )?;
         }

@@ -38,6 +38,11 @@ pub struct View {
     /// a pixel of its content, the cut sends it instead of the node's aggregate.
     #[serde(default = "default_impostors")]
     pub impostors: bool,
+    /// Whether a node whose objects' models are cheaper to send shared, at their levels of
+    /// detail and placed, than as one aggregate mesh is sent that way, as an `instances`
+    /// entry (default true).
+    #[serde(default = "default_instances")]
+    pub instances: bool,
     /// What the cut may cost.
     #[serde(default)]
     pub budgets: Budgets,
@@ -59,6 +64,10 @@ fn default_impostors() -> bool {
     true
 }
 
+fn default_instances() -> bool {
+    true
+}
+
 /// The largest `max_entries` a view may ask for.
 pub const MAX_ENTRIES_LIMIT: u64 = 1_000_000;
 
@@ -71,6 +80,7 @@ impl View {
             pixel_solid_angle: DEFAULT_PIXEL_SOLID_ANGLE,
             max_pixel_error: DEFAULT_MAX_PIXEL_ERROR,
             impostors: true,
+            instances: true,
             budgets: Budgets::default(),
         }
     }
@@ -186,6 +196,9 @@ pub enum EntryKind {
     Aggregate,
     /// A BVH node, drawn as orthoview impostors.
     Impostor,
+    /// A BVH node, drawn as its objects: each object's model at its level of detail, placed.
+    /// The models are shared with every other entry that draws them.
+    Instances,
 }
 
 /// What an asset is to the entry that names it.
@@ -232,14 +245,15 @@ pub struct Placement {
 pub struct Entry {
     /// Names one content, never two: `o:<object id>@<generation that placed it>` for an
     /// object, `n:<node id>@<asset hash>` for an aggregate, `n:<node id>@<impostor key>.<views
-    /// sent, a bit each, hex>` for an impostor.
+    /// sent, a bit each, hex>` for an impostor, `n:<node id>@i<16 hex digits>` for instances
+    /// (a hash of the objects, their placements and their levels).
     pub id: String,
     /// What it is.
     pub kind: EntryKind,
     /// The blobs it needs.
     pub assets: Vec<Asset>,
     /// Where they are drawn (an aggregate's mesh is in world space: the identity; an impostor
-    /// has none, its views say where they are).
+    /// has none, its views say where they are; instances have one per object).
     pub placements: Vec<Placement>,
     /// The level of detail of an object's model (0: the model as uploaded; see the model's
     /// `levels`): the coarsest whose error, projected at the object's nearest point, is at

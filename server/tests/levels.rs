@@ -112,6 +112,11 @@ async fn models(app: &axum::Router) -> HashMap<String, ModelInfo> {
         .collect()
 }
 
+/// A placement's translation, bit for bit.
+fn translation(m: &[f32; 12]) -> [u32; 3] {
+    [m[9].to_bits(), m[10].to_bits(), m[11].to_bits()]
+}
+
 /// `o:<id>@<placed>[/<level>]` -> id.
 fn object_of(id: &str) -> u64 {
     id[2..id.find('@').unwrap()].parse().unwrap()
@@ -153,9 +158,38 @@ async fn levels_rise_with_distance_and_cuts_stay_complete() {
     let models = models(&app).await;
     // Every object as itself: the levels alone decide what is sent. Under a triangle budget
     // each object is at its own level.
-    let all = "min_solid_angle=1e-9&max_entries=100000";
+    let all = "min_solid_angle=1e-9&max_entries=100000&instances=false";
     let c = cut(&app, &format!("eye=0,2,0&{all}&max_triangles=1000000000")).await;
     assert_eq!(c.entries.len(), MODELS * ROW);
+    // Drawn as instances, every object keeps the level its own entry has.
+    let own: HashMap<[u32; 3], &str> = c
+        .entries
+        .iter()
+        .map(|e| {
+            (
+                translation(&e.placements[0].matrix),
+                e.assets[0].hash.as_str(),
+            )
+        })
+        .collect();
+    let grouped = cut(
+        &app,
+        "eye=0,2,0&min_solid_angle=1e-9&max_entries=100000&max_triangles=1000000000",
+    )
+    .await;
+    let placed: Vec<&horizon_protocol::Placement> = grouped
+        .entries
+        .iter()
+        .filter(|e| e.kind == EntryKind::Instances)
+        .flat_map(|e| &e.placements)
+        .collect();
+    assert!(
+        !placed.is_empty(),
+        "no object of this cut is drawn as an instance"
+    );
+    for p in placed {
+        assert_eq!(own[&translation(&p.matrix)], p.asset.as_str());
+    }
     let mut by_model: HashMap<u64, Vec<(f32, u32)>> = HashMap::new();
     for e in &c.entries {
         assert_eq!(e.kind, EntryKind::Object);

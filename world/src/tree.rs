@@ -8,7 +8,7 @@
 //! held: the same nodes, hence the same aggregate keys, so nothing built is rebuilt after a
 //! restart.
 
-use std::collections::{BTreeMap, BTreeSet};
+use std::collections::{BTreeMap, BTreeSet, HashMap};
 
 use glam::{Affine3A, Vec3};
 use horizon_bvh::{Bvh, NewObject, NodeId, ObjectId, Sphere};
@@ -36,6 +36,8 @@ pub struct Tree {
     /// The same, ordered by generation: the objects placed after a generation (the pending
     /// objects of a cut) are a range of it.
     by_generation: BTreeSet<(u64, u64)>,
+    /// Model number -> how many objects the tree places with it.
+    uses: HashMap<u64, u32>,
 }
 
 /// What a snapshot stores.
@@ -88,8 +90,12 @@ impl Tree {
 
     fn with_ids(bvh: Bvh, generation: u64, ids: BTreeMap<u64, ObjectId>) -> Self {
         let mut back = Vec::new();
+        let mut uses = HashMap::new();
         for (&w, &t) in &ids {
             set_slot(&mut back, t, w);
+            if let Some(o) = bvh.object(t) {
+                *uses.entry(o.model()).or_insert(0) += 1;
+            }
         }
         Self {
             bvh,
@@ -98,6 +104,7 @@ impl Tree {
             back,
             placed: Vec::new(),
             by_generation: BTreeSet::new(),
+            uses,
         }
     }
 
@@ -169,6 +176,7 @@ impl Tree {
             (Some((model, transform)), None) => {
                 let d = descriptors.descriptors_of(model)?;
                 let id = self.bvh.insert(&new_object(model, transform, &d))?;
+                *self.uses.entry(model).or_insert(0) += 1;
                 self.ids.insert(change.object, id);
                 set_slot(&mut self.back, id, change.object);
                 self.place(change.object, change.generation);
@@ -182,7 +190,11 @@ impl Tree {
                 touched.extend(self.ancestors(id));
             }
             (None, Some(id)) => {
+                let model = self.bvh.object(id).map(|o| o.model());
                 self.bvh.remove(id)?;
+                if let Some(n) = model.and_then(|m| self.uses.get_mut(&m)) {
+                    *n = n.saturating_sub(1);
+                }
                 self.unplace(change.object);
                 self.ids.remove(&change.object);
                 set_slot(&mut self.back, id, NO_SLOT);
@@ -198,6 +210,11 @@ impl Tree {
         touched.sort_unstable();
         touched.dedup();
         Ok(touched)
+    }
+
+    /// How many objects the tree places with model `model`.
+    pub fn uses(&self, model: u64) -> u32 {
+        self.uses.get(&model).copied().unwrap_or(0)
     }
 
     /// The tree id of a world object.

@@ -65,16 +65,7 @@ pub fn plan_after(
 ) -> Plan {
     let mut planner = Planner::new(served, models, view);
     if let Some(held) = held {
-        planner.held_levels = held
-            .items
-            .iter()
-            .filter_map(|p| match (p.key, &p.what) {
-                (Key::Object { object, .. }, Drawn::Object { needed, .. }) => {
-                    Some((object, *needed))
-                }
-                _ => None,
-            })
-            .collect();
+        planner.held_levels = held.held_levels();
     }
     planner.seed();
     let stopped_by = planner.refine();
@@ -126,8 +117,12 @@ pub struct Decisions {
     ordered: bool,
     /// Each pending object, and whether it subtended `min_solid_angle`.
     pending: Vec<(ObjectId, bool)>,
-    /// Each object entry's own level of detail (before models share levels).
+    /// Each object's own level of detail, of object entries and instances (before models
+    /// share levels).
     levels: Vec<(ObjectId, u8)>,
+    /// Every node whose instances refinement weighed against its aggregate (also of nodes
+    /// refined later), and whether instances won.
+    instances: Vec<(NodeId, bool)>,
     /// Every node with an impostor that refinement put in the cut (also those refined later),
     /// and the views it was charged for (0: none, its aggregate), with what deciding that
     /// again needs.
@@ -288,6 +283,13 @@ pub enum Key {
         /// The views sent, a bit per index in the impostor's views.
         views: u16,
     },
+    /// A node drawn as its objects' models, placed.
+    Instances {
+        /// The node.
+        node: u32,
+        /// A hash of its objects, their placements and their levels ([`instances_content`]).
+        content: u64,
+    },
 }
 
 /// What a planned entry draws, besides what its [`Key`] names.
@@ -308,6 +310,27 @@ pub enum Drawn {
     Aggregate,
     /// The node's published impostor (in the plan's manifest), the key's views of it.
     Impostor,
+    /// The node's objects, each drawn as its model at a level of detail.
+    Instances(Arc<[Instance]>),
+}
+
+/// One object of an instances entry.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Instance {
+    /// World id.
+    pub object: u64,
+    /// Tree id.
+    pub tree: ObjectId,
+    /// The generation that placed it.
+    pub placed: u64,
+    /// The model's number.
+    pub model: u64,
+    /// Model to world.
+    pub transform: Affine3A,
+    /// The coarsest level the object itself may be drawn at.
+    pub needed: u8,
+    /// The level drawn (finer where another object of the model needs it).
+    pub level: u8,
 }
 
 /// What the cut needs of a model: its levels of detail, level 0 (the stored GLB) first.
@@ -494,7 +517,7 @@ impl AssetTable {
     /// detail (a model known with its levels is kept as it is).
     pub fn refresh(&self, world: &World) -> Result<(), WorldError> {
         let rows = world.all_models()?;
-        let before = self.snapshot();
+        let before = self.models();
         let all = if before.is_empty() {
             Some(world.all_levels()?)
         } else {
@@ -551,7 +574,7 @@ impl AssetTable {
     }
 
     /// The table as it is now.
-    fn snapshot(&self) -> Arc<Models> {
+    pub fn models(&self) -> Arc<Models> {
         self.by_number.read().map(|t| t.clone()).unwrap_or_default()
     }
 }
@@ -592,6 +615,9 @@ enum Unit {
     Node(NodeId),
     /// An object as itself.
     Object(ObjectId),
+    /// A node as its objects, each its model at its level, with the pending objects it
+    /// leaves to entries of their own. Never refined: its children would draw the same.
+    Instances(NodeId),
 }
 
 /// An asset as the budgets count it: once per cut.
@@ -661,6 +687,8 @@ struct Planner<'a> {
     pixel_angle: f32,
     /// Each node with an impostor put in the cut, and the views it was charged for.
     impostor_choices: Vec<(NodeId, u16)>,
+    /// Each node whose instances were weighed against its aggregate, and the outcome.
+    instance_choices: Vec<(NodeId, bool)>,
 }
 
 impl<'a> Planner<'a> {
@@ -684,7 +712,7 @@ impl<'a> Planner<'a> {
         Self {
             served,
             nodes: models.node_assets(served.manifest.as_ref()),
-            models: models.snapshot(),
+            models: models.models(),
             view: *view,
             eye: eye_of(view.eye),
             min_solid_angle: view.min_solid_angle as f32,
@@ -708,29 +736,25 @@ impl<'a> Planner<'a> {
             held_levels: HashMap::new(),
             pixel_angle: pixel_angle(view),
             impostor_choices: Vec::new(),
+            instance_choices: Vec::new(),
         }
     }
 
     /// The level of detail `o` is drawn with (see [`ModelAsset::choose`]).
     fn level_of(&self, o: ObjectId) -> u8 {
-        let tree = self.served.tree;
-        let Some(r) = tree.bvh.object(o) else {
-            return 0;
-        };
-        let Some(m) = self.models.get(r.model() as usize).and_then(Option::as_ref) else {
-            return 0;
-        };
-        let held = tree
-            .world_id(o)
-            .and_then(|id| self.held_levels.get(&id).copied());
-        level_at(
-            m,
-            &r,
-            self.eye,
-            self.pixel_angle,
-            self.view.max_pixel_error,
-            held,
-        )
+        self.levels().of(o)
+    }
+
+    /// How this plan chooses levels of detail.
+    fn levels(&self) -> LevelChooser<'_> {
+        LevelChooser {
+            tree: self.served.tree,
+            models: &self.models,
+            eye: self.eye,
+            pixel_angle: self.pixel_angle,
+            max_pixel_error: self.view.max_pixel_error,
+            held: &self.held_levels,
+        }
     }
 
     /// The root, expanded at once wherever no aggregate can draw it.
@@ -794,8 +818,13 @@ impl<'a> Planner<'a> {
         let Some(n) = bvh.node(node) else {
             return;
         };
-        if self.aggregate(node).is_some() {
-            out.push(Unit::Node(node));
+        if let Some(a) = self.aggregate(node) {
+            let weigh = self.view.instances && self.impostor_views(node) == 0;
+            if weigh && self.levels().instances_win(node, a) {
+                out.push(Unit::Instances(node));
+            } else {
+                out.push(Unit::Node(node));
+            }
         } else if n.is_leaf() {
             out.extend(n.objects().map(Unit::Object));
         } else {
@@ -846,6 +875,7 @@ impl<'a> Planner<'a> {
         }
         match unit {
             Unit::Object(o) => self.charge_object(o, sign),
+            Unit::Instances(node) => self.charge_instances(node, sign),
             Unit::Node(node) => {
                 let extracted: Vec<ObjectId> = self.extracted(node).collect();
                 for &o in &extracted {
@@ -864,6 +894,10 @@ impl<'a> Planner<'a> {
                         // Every choice that cost something, also of nodes refined later: under
                         // a byte or draw-call budget it moved where refinement stopped.
                         self.impostor_choices.push((node, views));
+                    }
+                    if sign > 0 && self.view.instances && views == 0 {
+                        // `expand` weighed its instances and they lost.
+                        self.instance_choices.push((node, false));
                     }
                     if let Some(a) = self.aggregate(node) {
                         let (key, bytes, draw_calls, triangles) =
@@ -911,10 +945,82 @@ impl<'a> Planner<'a> {
         );
     }
 
-    fn charge(&mut self, key: AssetKey, bytes: u64, draw_calls: u64, triangles: u64, sign: i64) {
+    /// A node drawn as instances: its pending objects that subtend `min_solid_angle` as
+    /// entries of their own, then one entry whose assets are its objects' model levels,
+    /// each counted once per cut.
+    fn charge_instances(&mut self, node: NodeId, sign: i64) {
+        let extracted: HashSet<ObjectId> = self.extracted(node).collect();
+        for &o in &extracted {
+            self.charge_object(o, sign);
+        }
+        if sign > 0 {
+            let has_impostor = self.aggregate(node).is_some_and(|a| a.impostor.is_some());
+            if self.view.impostors && has_impostor {
+                self.impostor_choices.push((node, 0));
+            }
+            self.instance_choices.push((node, true));
+        }
+        let mut under = Vec::new();
+        self.served.tree.bvh.objects_under(node, &mut under);
+        let mut assets: HashMap<(u64, u8), (u64, u64, u64)> = HashMap::new();
+        for o in under.into_iter().filter(|o| !extracted.contains(o)) {
+            let Some(model) = self.served.tree.bvh.object(o).map(|r| r.model()) else {
+                continue;
+            };
+            let level = self.level_of(o);
+            let Some(l) = self
+                .models
+                .get(model as usize)
+                .and_then(Option::as_ref)
+                .map(|m| m.level(level))
+            else {
+                continue;
+            };
+            let a = assets
+                .entry((model, level))
+                .or_insert((l.bytes, l.draw_calls, 0));
+            a.2 += l.triangles;
+        }
+        if assets.is_empty() {
+            return;
+        }
+        self.count_entry(sign);
+        for ((model, level), (bytes, draw_calls, triangles)) in assets {
+            self.charge_asset(
+                AssetKey::Model(model, level),
+                bytes,
+                draw_calls,
+                triangles,
+                sign,
+            );
+        }
+    }
+
+    fn count_entry(&mut self, sign: i64) {
         let t = &mut self.totals;
         if sign > 0 {
             t.entries += 1;
+        } else {
+            t.entries = t.entries.saturating_sub(1);
+        }
+    }
+
+    fn charge(&mut self, key: AssetKey, bytes: u64, draw_calls: u64, triangles: u64, sign: i64) {
+        self.count_entry(sign);
+        self.charge_asset(key, bytes, draw_calls, triangles, sign);
+    }
+
+    /// An asset's bytes and draw calls, once per cut, and its triangles, every time.
+    fn charge_asset(
+        &mut self,
+        key: AssetKey,
+        bytes: u64,
+        draw_calls: u64,
+        triangles: u64,
+        sign: i64,
+    ) {
+        let t = &mut self.totals;
+        if sign > 0 {
             t.triangles += triangles;
             let count = self.assets.entry(key).or_insert(0);
             if *count == 0 {
@@ -923,7 +1029,6 @@ impl<'a> Planner<'a> {
             }
             *count += 1;
         } else {
-            t.entries = t.entries.saturating_sub(1);
             t.triangles = t.triangles.saturating_sub(triangles);
             if let Some(count) = self.assets.get_mut(&key) {
                 *count = count.saturating_sub(1);
@@ -984,6 +1089,7 @@ impl<'a> Planner<'a> {
                 })
                 .collect(),
             levels: Vec::new(),
+            instances: std::mem::take(&mut self.instance_choices),
             impostors: {
                 let mut choices = std::mem::take(&mut self.impostor_choices);
                 choices.sort_unstable_by_key(|&(n, _)| n.0);
@@ -1030,6 +1136,54 @@ impl<'a> Planner<'a> {
                 Unit::Object(o) => {
                     items.extend(object_item(o, self.pending.contains(&o)));
                 }
+                Unit::Instances(node) => {
+                    let extracted: HashSet<ObjectId> = self.extracted(node).collect();
+                    items.extend(extracted.iter().filter_map(|&o| object_item(o, true)));
+                    let Some(n) = tree.bvh.node(node) else {
+                        continue;
+                    };
+                    let mut under = Vec::new();
+                    tree.bvh.objects_under(node, &mut under);
+                    let mut instances: Vec<Instance> = under
+                        .into_iter()
+                        .filter(|o| !extracted.contains(o))
+                        .filter_map(|o| {
+                            let r = tree.bvh.object(o)?;
+                            let model = r.model();
+                            if self.models.get(model as usize).is_none_or(Option::is_none) {
+                                missing.set(missing.get() + 1);
+                                return None;
+                            }
+                            let level = self.level_of(o);
+                            Some(Instance {
+                                object: tree.world_id(o)?,
+                                tree: o,
+                                placed: tree.placed_at(o),
+                                model,
+                                transform: r.transform(),
+                                needed: level,
+                                level,
+                            })
+                        })
+                        .collect();
+                    if instances.is_empty() {
+                        continue;
+                    }
+                    instances.sort_unstable_by_key(|i| i.object);
+                    let sphere = n.outer_sphere();
+                    items.push(Planned {
+                        key: Key::Instances {
+                            node: node.0,
+                            content: 0,
+                        },
+                        covers: instances.len() as u64,
+                        what: Drawn::Instances(instances.into()),
+                        pending: false,
+                        center: sphere.centre.to_array(),
+                        radius: sphere.radius,
+                        solid_angle: self.worst_case(node).unwrap_or(0.0),
+                    });
+                }
                 Unit::Node(node) => {
                     let extracted: Vec<ObjectId> = self.extracted(node).collect();
                     items.extend(extracted.iter().filter_map(|&o| object_item(o, true)));
@@ -1071,17 +1225,31 @@ impl<'a> Planner<'a> {
                 }
             }
         }
-        decisions.levels = items
-            .iter()
-            .filter_map(|p| match (p.key, &p.what) {
+        decisions.levels = Vec::with_capacity(items.len());
+        for p in &items {
+            match (p.key, &p.what) {
                 (Key::Object { object, .. }, Drawn::Object { needed, .. }) => {
-                    Some((tree.tree_id(object)?, *needed))
+                    decisions
+                        .levels
+                        .extend(tree.tree_id(object).map(|o| (o, *needed)));
                 }
-                _ => None,
-            })
-            .collect();
+                (_, Drawn::Instances(instances)) => {
+                    decisions
+                        .levels
+                        .extend(instances.iter().map(|i| (i.tree, i.needed)));
+                }
+                _ => {}
+            }
+        }
         if self.budgets.max_triangles.is_none() {
             share_levels(&mut items);
+        }
+        for p in &mut items {
+            if let (Key::Instances { content, .. }, Drawn::Instances(instances)) =
+                (&mut p.key, &p.what)
+            {
+                *content = instances_content(instances);
+            }
         }
         Plan {
             manifest: self.served.manifest.clone(),
@@ -1105,16 +1273,129 @@ impl<'a> Planner<'a> {
 /// planner leaves every object at its own level.
 fn share_levels(items: &mut [Planned]) {
     let mut finest: HashMap<u64, u8> = HashMap::new();
+    let mut need = |model: u64, needed: u8| {
+        let f = finest.entry(model).or_insert(needed);
+        *f = (*f).min(needed);
+    };
     for p in items.iter() {
-        if let Drawn::Object { model, needed, .. } = p.what {
-            let f = finest.entry(model).or_insert(needed);
-            *f = (*f).min(needed);
+        match &p.what {
+            Drawn::Object { model, needed, .. } => need(*model, *needed),
+            Drawn::Instances(instances) => {
+                for i in instances.iter() {
+                    need(i.model, i.needed);
+                }
+            }
+            Drawn::Aggregate | Drawn::Impostor => {}
         }
     }
     for p in items.iter_mut() {
-        if let (Drawn::Object { model, .. }, Key::Object { level, .. }) = (&p.what, &mut p.key) {
-            *level = finest[model];
+        match (&mut p.what, &mut p.key) {
+            (Drawn::Object { model, .. }, Key::Object { level, .. }) => *level = finest[model],
+            (Drawn::Instances(instances), _) => {
+                let shared: Vec<Instance> = instances
+                    .iter()
+                    .map(|i| Instance {
+                        level: finest[&i.model],
+                        ..i.clone()
+                    })
+                    .collect();
+                *instances = shared.into();
+            }
+            _ => {}
         }
+    }
+}
+
+/// What names an instances entry's content: FNV-1a over each object's id, the generation
+/// that placed it, its model and its level, in the order of the ids.
+fn instances_content(instances: &[Instance]) -> u64 {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for i in instances {
+        for word in [i.object, i.placed, i.model, u64::from(i.level)] {
+            for byte in word.to_le_bytes() {
+                h ^= u64::from(byte);
+                h = h.wrapping_mul(0x0000_0100_0000_01b3);
+            }
+        }
+    }
+    h
+}
+
+/// How a plan chooses objects' levels of detail, and weighs a node's instances against its
+/// aggregate: the planner and [`Plan::holds_at`] both use it, so that they agree to the bit.
+struct LevelChooser<'a> {
+    tree: &'a horizon_world::Tree,
+    models: &'a Models,
+    eye: Vec3,
+    pixel_angle: f32,
+    max_pixel_error: f64,
+    /// The levels objects have in the plan a client holds, by world id.
+    held: &'a HashMap<u64, u8>,
+}
+
+impl LevelChooser<'_> {
+    /// The level an object is drawn at (0 when its model is not in the table).
+    fn of(&self, o: ObjectId) -> u8 {
+        let Some(r) = self.tree.bvh.object(o) else {
+            return 0;
+        };
+        let Some(m) = self.models.get(r.model() as usize).and_then(Option::as_ref) else {
+            return 0;
+        };
+        let held = self
+            .tree
+            .world_id(o)
+            .and_then(|id| self.held.get(&id).copied());
+        level_at(
+            m,
+            &r,
+            self.eye,
+            self.pixel_angle,
+            self.max_pixel_error,
+            held,
+        )
+    }
+
+    /// Whether `node` costs less drawn as its objects' models than as its aggregate `a`.
+    ///
+    /// Each object is charged its level's bytes and draw calls divided by the number of
+    /// objects in the world that share its model: a model placed a thousand times is
+    /// downloaded once for all of them, so each placement owes a thousandth of it. A node
+    /// of distinct models is charged every model whole. Instances win when that share is at
+    /// most the aggregate's bytes and at most its draw calls. The sum is taken in the
+    /// tree's order and given up as soon as it passes either, so a node of distinct models
+    /// costs a few objects' visits. A node with an object whose model is not in the table
+    /// cannot be drawn as instances.
+    fn instances_win(&self, node: NodeId, a: &NodeAsset) -> bool {
+        let bvh = &self.tree.bvh;
+        let (limit_bytes, limit_calls) = (a.bytes as f64, a.draw_calls as f64);
+        let (mut bytes, mut calls) = (0.0f64, 0.0f64);
+        let mut stack = vec![node];
+        while let Some(n) = stack.pop() {
+            let Some(r) = bvh.node(n) else {
+                return false;
+            };
+            if !r.is_leaf() {
+                stack.extend(r.child_nodes());
+                continue;
+            }
+            for o in r.objects() {
+                let Some(model) = bvh.object(o).map(|x| x.model()) else {
+                    return false;
+                };
+                let Some(m) = self.models.get(model as usize).and_then(Option::as_ref) else {
+                    return false;
+                };
+                let l = m.level(self.of(o));
+                let share = 1.0 / f64::from(self.tree.uses(model).max(1));
+                bytes += l.bytes as f64 * share;
+                calls += l.draw_calls as f64 * share;
+                if bytes > limit_bytes || calls > limit_calls {
+                    return false;
+                }
+            }
+        }
+        true
     }
 }
 
@@ -1131,13 +1412,15 @@ impl Planned {
     fn level(&self) -> u8 {
         match self.key {
             Key::Object { level, .. } => level,
-            Key::Aggregate { .. } | Key::Impostor { .. } => 0,
+            Key::Aggregate { .. } | Key::Impostor { .. } | Key::Instances { .. } => 0,
         }
     }
 
     fn node(&self) -> Option<NodeId> {
         match self.key {
-            Key::Aggregate { node, .. } | Key::Impostor { node, .. } => Some(NodeId(node)),
+            Key::Aggregate { node, .. }
+            | Key::Impostor { node, .. }
+            | Key::Instances { node, .. } => Some(NodeId(node)),
             Key::Object { .. } => None,
         }
     }
@@ -1145,7 +1428,7 @@ impl Planned {
     fn object(&self) -> Option<u64> {
         match self.key {
             Key::Object { object, .. } => Some(object),
-            Key::Aggregate { .. } | Key::Impostor { .. } => None,
+            Key::Aggregate { .. } | Key::Impostor { .. } | Key::Instances { .. } => None,
         }
     }
 }
@@ -1191,7 +1474,7 @@ impl Plan {
         }
         let (eye, bvh) = (eye_of(eye), &tree.bvh);
         let pixel_angle = pixel_angle(&self.view);
-        self.decisions.levels.iter().all(|&(o, level)| {
+        let levels_hold = self.decisions.levels.iter().all(|&(o, level)| {
             let Some(r) = bvh.object(o) else {
                 return false;
             };
@@ -1200,6 +1483,25 @@ impl Plan {
             };
             let held = Some(level);
             level_at(m, &r, eye, pixel_angle, self.view.max_pixel_error, held) == level
+        });
+        if !levels_hold || self.decisions.instances.is_empty() {
+            return levels_hold;
+        }
+        // Weigh every node's instances again as planning with this plan held would.
+        let held = self.held_levels();
+        let chooser = LevelChooser {
+            tree,
+            models: &self.models,
+            eye,
+            pixel_angle,
+            max_pixel_error: self.view.max_pixel_error,
+            held: &held,
+        };
+        self.decisions.instances.iter().all(|&(node, won)| {
+            let asset = self.decisions.nodes.get(node.0 as usize);
+            asset
+                .and_then(Option::as_ref)
+                .is_some_and(|a| chooser.instances_win(node, a) == won)
         })
     }
 
@@ -1241,6 +1543,7 @@ impl Plan {
                 let key = self.impostor(p).map_or("", |i| i.key.as_str());
                 format!("n:{node}@{key}.{views:03x}")
             }
+            Key::Instances { node, content } => format!("n:{node}@i{content:016x}"),
         }
     }
 
@@ -1306,10 +1609,75 @@ impl Plan {
         }
     }
 
+    /// An instances entry: each model level once among its assets, each object a placement.
+    fn instances_entry(&self, p: &Planned, instances: &[Instance]) -> Entry {
+        let mut assets: Vec<Asset> = Vec::new();
+        let mut index: HashMap<(u64, u8), usize> = HashMap::new();
+        let mut placements = Vec::with_capacity(instances.len());
+        let (mut triangles, mut draw_calls) = (0, 0);
+        for i in instances {
+            let Some(m) = self.models.get(i.model as usize).and_then(Option::as_ref) else {
+                continue;
+            };
+            let l = m.level(i.level);
+            if let std::collections::hash_map::Entry::Vacant(v) = index.entry((i.model, i.level)) {
+                v.insert(assets.len());
+                assets.push(Asset {
+                    hash: l.hash.clone(),
+                    bytes: l.bytes,
+                    role: AssetRole::Model,
+                });
+                draw_calls += l.draw_calls;
+            }
+            triangles += l.triangles;
+            placements.push(Placement {
+                asset: l.hash.clone(),
+                matrix: matrix_of(&i.transform),
+            });
+        }
+        Entry {
+            id: self.id(p),
+            kind: EntryKind::Instances,
+            bytes: assets.iter().map(|a| a.bytes).sum(),
+            assets,
+            placements,
+            level: 0,
+            pending: false,
+            triangles,
+            draw_calls,
+            center: p.center,
+            radius: p.radius,
+            covers: p.covers,
+            impostor: None,
+        }
+    }
+
+    /// The levels of detail its objects need, by world id: what [`plan_after`] holds them
+    /// to.
+    fn held_levels(&self) -> HashMap<u64, u8> {
+        let mut held = HashMap::new();
+        for p in &self.items {
+            match &p.what {
+                Drawn::Object { needed, .. } => {
+                    if let Key::Object { object, .. } = p.key {
+                        held.insert(object, *needed);
+                    }
+                }
+                Drawn::Instances(instances) => {
+                    held.extend(instances.iter().map(|i| (i.object, i.needed)));
+                }
+                Drawn::Aggregate | Drawn::Impostor => {}
+            }
+        }
+        held
+    }
+
     /// A planned entry as the wire carries it.
     pub fn entry(&self, p: &Planned) -> Entry {
-        if let Drawn::Impostor = p.what {
-            return self.impostor_entry(p);
+        match &p.what {
+            Drawn::Impostor => return self.impostor_entry(p),
+            Drawn::Instances(instances) => return self.instances_entry(p, instances),
+            Drawn::Object { .. } | Drawn::Aggregate => {}
         }
         let mut level = 0;
         let mut preview = None;
@@ -1342,7 +1710,9 @@ impl Plan {
                     AssetRole::Model,
                 )
             }
-            Drawn::Impostor => unreachable!("impostors are made by impostor_entry"),
+            Drawn::Impostor | Drawn::Instances(_) => {
+                unreachable!("impostors and instances have entries of their own")
+            }
             Drawn::Aggregate => {
                 let a = self.aggregate(p);
                 let cost = a.map(NodeAsset::of);

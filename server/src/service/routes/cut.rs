@@ -27,6 +27,9 @@ pub struct CutParams {
     pub max_pixel_error: Option<f64>,
     /// Whether the client draws impostors. Default true.
     pub impostors: Option<bool>,
+    /// Whether a node of reused models may be sent as its objects' shared models, placed
+    /// (an `instances` entry), where that costs less than its aggregate. Default true.
+    pub instances: Option<bool>,
     /// The most entries (default 4,000).
     pub max_entries: Option<u64>,
     /// The most asset bytes.
@@ -56,6 +59,7 @@ impl CutParams {
             pixel_solid_angle: self.pixel_solid_angle.unwrap_or(DEFAULT_PIXEL_SOLID_ANGLE),
             max_pixel_error: self.max_pixel_error.unwrap_or(DEFAULT_MAX_PIXEL_ERROR),
             impostors: self.impostors.unwrap_or(true),
+            instances: self.instances.unwrap_or(true),
             budgets: Budgets {
                 max_entries: self.max_entries,
                 max_bytes: self.max_bytes,
