@@ -370,6 +370,12 @@ impl Bvh {
         self.objects.live
     }
 
+    /// One more than the largest object id ever given (free ids included): the length of a
+    /// table indexed by object id.
+    pub fn object_slots(&self) -> usize {
+        self.objects.model.len()
+    }
+
     /// True when the tree holds no object.
     pub fn is_empty(&self) -> bool {
         self.objects.live == 0

@@ -57,6 +57,10 @@ pub struct Args {
     /// The cut's draw-call budget.
     #[arg(long)]
     pub max_draw_calls: Option<u64>,
+    /// The cut's triangle budget. Under one, every object keeps its own level of detail
+    /// instead of the finest its model needs anywhere in the cut.
+    #[arg(long)]
+    pub max_triangles: Option<u64>,
     /// The geometric error, in pixels, an object's level of detail may show (0: every
     /// object at full detail).
     #[arg(long, default_value_t = horizon_protocol::DEFAULT_MAX_PIXEL_ERROR)]
@@ -85,6 +89,9 @@ pub struct Args {
     /// (below 1: nearer than the aggregate was built to be seen, as when a budget binds).
     #[arg(long, default_value_t = 1.0)]
     pub node_distance: f32,
+    /// Also write the report as JSON to this file (one run for the table and the JSON).
+    #[arg(long)]
+    pub json_out: Option<PathBuf>,
     /// Folder to write each view's renders (full, cut, difference) into as PNG.
     #[arg(long)]
     pub images: Option<PathBuf>,
@@ -139,6 +146,10 @@ pub struct ViewReport {
     pub aggregates_only: Option<FlatReport>,
     /// Instances entries of the cut.
     pub instance_entries: usize,
+    /// Milliseconds to plan the cut and make its entries (the median of five).
+    pub plan_ms: f64,
+    /// The same for the cut without instances, with `--instances-peer`.
+    pub plan_ms_without_instances: Option<f64>,
     /// Impostor entries of the cut.
     pub impostors: usize,
     /// With `--node` and `--impostors`: PSNR of the node's impostor against its aggregate.
@@ -172,6 +183,12 @@ pub struct Cost {
     pub draw_calls: u64,
     /// Triangles drawn.
     pub triangles: u64,
+    /// The entries as JSON (what `GET /v1/cut` sends), bytes: for the full world, the
+    /// placements a naive client needs besides the models.
+    pub entries_json: u64,
+    /// The same, zstd-compressed at level 3 (the server compresses answers by
+    /// `Accept-Encoding`).
+    pub entries_zstd: u64,
 }
 
 /// The whole run.
@@ -193,6 +210,8 @@ pub struct Report {
     pub max_entries: u64,
     /// Draw-call budget.
     pub max_draw_calls: Option<u64>,
+    /// Triangle budget.
+    pub max_triangles: Option<u64>,
     /// Pixels of error a level of detail may show.
     pub max_pixel_error: f64,
     /// Per view.
@@ -202,6 +221,10 @@ pub struct Report {
 /// Runs the measure and prints its table (or JSON).
 pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
     let report = measure(args)?;
+    if let Some(path) = &args.json_out {
+        std::fs::write(path, serde_json::to_string_pretty(&report)?)
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
     if json {
         outln!("{}", serde_json::to_string_pretty(&report)?)?;
     } else {
@@ -235,6 +258,7 @@ pub fn measure(args: &Args) -> anyhow::Result<Report> {
     let mut everything = View::at([0.0; 3]);
     everything.min_solid_angle = 1e-12;
     everything.max_pixel_error = 0.0;
+    everything.instances = false;
     everything.budgets = Budgets {
         max_entries: Some(horizon_protocol::MAX_ENTRIES_LIMIT),
         ..Budgets::default()
@@ -274,17 +298,19 @@ pub fn measure(args: &Args) -> anyhow::Result<Report> {
         view.budgets = Budgets {
             max_entries: Some(args.max_entries),
             max_draw_calls: args.max_draw_calls,
+            max_triangles: args.max_triangles,
             ..Budgets::default()
         };
-        let cut_entries = world.with_served(|s| plan(s, &table, &view).entries())?;
-        let plain_entries = if args.instances_peer {
+        let (cut_entries, plan_ms) = timed_plan(&world, &table, &view)?;
+        let (plain_entries, plain_plan_ms) = if args.instances_peer {
             let plain = View {
                 instances: false,
                 ..view
             };
-            Some(world.with_served(|s| plan(s, &table, &plain).entries())?)
+            let (entries, ms) = timed_plan(&world, &table, &plain)?;
+            (Some(entries), Some(ms))
         } else {
-            None
+            (None, None)
         };
         let mut costs = costed(
             &world,
@@ -295,6 +321,8 @@ pub fn measure(args: &Args) -> anyhow::Result<Report> {
             full_cost,
             &object_boxes,
         )?;
+        costs.plan_ms = plan_ms;
+        costs.plan_ms_without_instances = plain_plan_ms;
         let Some(full_scene) = &full_scene else {
             costs.aggregates_only = plain_entries.map(|e| FlatReport {
                 psnr: f64::NAN,
@@ -399,9 +427,23 @@ pub fn measure(args: &Args) -> anyhow::Result<Report> {
         min_solid_angle: args.min_solid_angle,
         max_entries: args.max_entries,
         max_draw_calls: args.max_draw_calls,
+        max_triangles: args.max_triangles,
         max_pixel_error: args.max_pixel_error,
         views,
     })
+}
+
+/// Plans `view` five times; its entries and the median milliseconds a plan took.
+fn timed_plan(world: &World, table: &AssetTable, view: &View) -> anyhow::Result<(Vec<Entry>, f64)> {
+    let mut times = Vec::with_capacity(5);
+    let mut entries = Vec::new();
+    for _ in 0..5 {
+        let started = Instant::now();
+        entries = world.with_served(|s| plan(s, table, view).entries())?;
+        times.push(started.elapsed().as_secs_f64() * 1e3);
+    }
+    times.sort_by(f64::total_cmp);
+    Ok((entries, times[2]))
 }
 
 /// A view's report without its images: its costs and its aggregates' bounds, with PSNR,
@@ -446,6 +488,8 @@ fn costed(
         flat: None,
         meshes_only: None,
         aggregates_only: None,
+        plan_ms: f64::NAN,
+        plan_ms_without_instances: None,
         instance_entries: cut_entries
             .iter()
             .filter(|e| e.kind == EntryKind::Instances)
@@ -619,6 +663,7 @@ fn focus(
         min_solid_angle: args.min_solid_angle,
         max_entries: args.max_entries,
         max_draw_calls: args.max_draw_calls,
+        max_triangles: args.max_triangles,
         max_pixel_error: args.max_pixel_error,
         views: vec![ViewReport {
             name,
@@ -641,6 +686,8 @@ fn focus(
             meshes_only,
             aggregates_only: None,
             instance_entries: 0,
+            plan_ms: f64::NAN,
+            plan_ms_without_instances: None,
             impostors: usize::from(impostor.is_some()),
             against_aggregate,
             objects_alone: Cost::default(),
@@ -738,7 +785,12 @@ impl<'w> Assets<'w> {
     /// triangles.
     fn cost(&self, entries: &[Entry]) -> Cost {
         let mut seen = HashSet::new();
-        let mut out = Cost::default();
+        let json = serde_json::to_vec(entries).unwrap_or_default();
+        let mut out = Cost {
+            entries_json: json.len() as u64,
+            entries_zstd: zstd::bulk::compress(&json, 3).map_or(0, |z| z.len() as u64),
+            ..Cost::default()
+        };
         for e in entries {
             out.triangles += e.triangles;
             // A preview (an object's coarsest level, for progressive loading) is not what the
@@ -981,7 +1033,7 @@ fn measured(x: f64, show: impl Fn(f64) -> String) -> String {
 
 fn print_table(r: &Report) -> anyhow::Result<()> {
     outln!(
-        "{}: {} objects, {}x{} at {} rays per pixel, cut at {} sr, at most {} entries{}",
+        "{}: {} objects, {}x{} at {} rays per pixel, cut at {} sr, at most {} entries{}{}",
         r.world,
         r.objects,
         r.width,
@@ -990,7 +1042,10 @@ fn print_table(r: &Report) -> anyhow::Result<()> {
         r.min_solid_angle,
         r.max_entries,
         r.max_draw_calls
-            .map_or(String::new(), |d| format!(", at most {d} draw calls"))
+            .map_or(String::new(), |d| format!(", at most {d} draw calls")),
+        r.max_triangles.map_or(String::new(), |t| format!(
+            ", at most {t} triangles (each object at its own level)"
+        ))
     )?;
     outln!()?;
     outln!("| view | PSNR dB | SSIM | off >16 | holes | download full / cut | draw calls full / cut | triangles full / cut | entries (aggregates, instances) | aggregate IoU median / min / < 0.9 |")?;
@@ -1056,14 +1111,14 @@ fn print_table(r: &Report) -> anyhow::Result<()> {
         outln!()?;
         outln!("Reuse-aware cut (instances entries) against the same cut without them (every node as its aggregate), both against the full world:")?;
         outln!()?;
-        outln!("| view | download without / with instances | draw calls without / with | triangles without / with | PSNR dB without / with | SSIM without / with | holes without / with | instances entries |")?;
-        outln!("|---|---|---|---|---|---|---|---|")?;
+        outln!("| view | download without / with instances | draw calls without / with | triangles without / with | PSNR dB without / with | SSIM without / with | holes without / with | instances entries | plan ms without / with | entries JSON zstd full / without / with |")?;
+        outln!("|---|---|---|---|---|---|---|---|---|---|")?;
         for v in &r.views {
             let Some(f) = &v.aggregates_only else {
                 continue;
             };
             outln!(
-                "| {} | {} / {} ({:.3}x) | {} / {} ({:.2}x) | {} / {} ({:.2}x) | {} / {} | {} / {} | {} / {} | {} of {} |",
+                "| {} | {} / {} ({:.3}x) | {} / {} ({:.2}x) | {} / {} ({:.2}x) | {} / {} | {} / {} | {} / {} | {} of {} | {:.1} / {:.1} | {} / {} / {} |",
                 v.name,
                 mb(f.cost.bytes),
                 mb(v.cut.bytes),
@@ -1081,7 +1136,12 @@ fn print_table(r: &Report) -> anyhow::Result<()> {
                 measured(f.holes, |x| format!("{:.3}%", x * 100.0)),
                 measured(v.holes, |x| format!("{:.3}%", x * 100.0)),
                 v.instance_entries,
-                v.entries
+                v.entries,
+                v.plan_ms_without_instances.unwrap_or(f64::NAN),
+                v.plan_ms,
+                mb(v.full.entries_zstd),
+                mb(f.cost.entries_zstd),
+                mb(v.cut.entries_zstd)
             )?;
         }
     }

@@ -689,7 +689,12 @@ struct Planner<'a> {
     impostor_choices: Vec<(NodeId, u16)>,
     /// Each node whose instances were weighed against its aggregate, and the outcome.
     instance_choices: Vec<(NodeId, bool)>,
+    /// Each object's level of detail once chosen, by tree id ([`UNCHOSEN`] before).
+    chosen: Vec<std::cell::Cell<u8>>,
 }
+
+/// A level not chosen yet (levels are far fewer).
+const UNCHOSEN: u8 = u8::MAX;
 
 impl<'a> Planner<'a> {
     fn new(served: &'a Served<'a>, models: &'a AssetTable, view: &View) -> Self {
@@ -737,6 +742,7 @@ impl<'a> Planner<'a> {
             pixel_angle: pixel_angle(view),
             impostor_choices: Vec::new(),
             instance_choices: Vec::new(),
+            chosen: vec![std::cell::Cell::new(UNCHOSEN); tree.bvh.object_slots()],
         }
     }
 
@@ -745,7 +751,7 @@ impl<'a> Planner<'a> {
         self.levels().of(o)
     }
 
-    /// How this plan chooses levels of detail.
+    /// How this plan chooses levels of detail, each object's once.
     fn levels(&self) -> LevelChooser<'_> {
         LevelChooser {
             tree: self.served.tree,
@@ -754,6 +760,7 @@ impl<'a> Planner<'a> {
             pixel_angle: self.pixel_angle,
             max_pixel_error: self.view.max_pixel_error,
             held: &self.held_levels,
+            chosen: &self.chosen,
         }
     }
 
@@ -1331,11 +1338,25 @@ struct LevelChooser<'a> {
     max_pixel_error: f64,
     /// The levels objects have in the plan a client holds, by world id.
     held: &'a HashMap<u64, u8>,
+    /// Levels already chosen, by tree id (empty: none kept).
+    chosen: &'a [std::cell::Cell<u8>],
 }
 
 impl LevelChooser<'_> {
     /// The level an object is drawn at (0 when its model is not in the table).
     fn of(&self, o: ObjectId) -> u8 {
+        let slot = self.chosen.get(o.0 as usize);
+        if let Some(level) = slot.map(std::cell::Cell::get).filter(|&l| l != UNCHOSEN) {
+            return level;
+        }
+        let level = self.choose(o);
+        if let Some(slot) = slot {
+            slot.set(level);
+        }
+        level
+    }
+
+    fn choose(&self, o: ObjectId) -> u8 {
         let Some(r) = self.tree.bvh.object(o) else {
             return 0;
         };
@@ -1496,6 +1517,7 @@ impl Plan {
             pixel_angle,
             max_pixel_error: self.view.max_pixel_error,
             held: &held,
+            chosen: &[],
         };
         self.decisions.instances.iter().all(|&(node, won)| {
             let asset = self.decisions.nodes.get(node.0 as usize);
