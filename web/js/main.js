@@ -4,7 +4,8 @@
 // Query parameters: `min_solid_angle` (default 0.001 sr), `max_entries` (default 4000),
 // `max_pixel_error` (default 1: the geometric error, in pixels, an object's level of detail may
 // show; 0 draws every object at full detail), `impostors=0` (no orthoview impostors: far nodes
-// as their aggregates), `cache_mb` (default 768), `antialias=0` (cheaper in software
+// as their aggregates), `instances=0` (no instances entries: nodes of reused models as their
+// aggregates too), `cache_mb` (default 768), `antialias=0` (cheaper in software
 // rendering), and `full`: draw every object as its model instead of the cut (the reference the
 // fidelity test compares with).
 //
@@ -23,6 +24,7 @@ const MIN_SOLID_ANGLE = Number(params.get('min_solid_angle') || 0.001);
 const MAX_ENTRIES = Number(params.get('max_entries') || 4000);
 const MAX_PIXEL_ERROR = params.has('max_pixel_error') ? Number(params.get('max_pixel_error')) : 1;
 const IMPOSTORS = params.get('impostors') !== '0';
+const INSTANCES = params.get('instances') !== '0';
 const CACHE_MB = Number(params.get('cache_mb') || 768);
 const FULL = params.has('full');
 const ANTIALIAS = params.get('antialias') !== '0';
@@ -97,6 +99,7 @@ function view() {
     pixel_solid_angle: pixel * pixel,
     max_pixel_error: MAX_PIXEL_ERROR,
     impostors: IMPOSTORS,
+    instances: INSTANCES,
     budgets: { max_entries: MAX_ENTRIES },
   };
 }
@@ -210,16 +213,17 @@ function frame(now) {
 function hud() {
   const mb = (b) => `${(b / 1048576).toFixed(1)} MB`;
   const k = (n) => (n >= 1e6 ? `${(n / 1e6).toFixed(2)}M` : n >= 1e4 ? `${(n / 1e3).toFixed(0)}k` : String(n));
-  let aggregates = 0, shown = 0;
+  let aggregates = 0, instances = 0, shown = 0;
   for (const id of world.current) {
     const e = world.entries.get(id);
     if (e.data.kind === 'aggregate') aggregates++;
+    if (e.data.kind === 'instances') instances++;
     if (e.state === 'shown') shown++;
   }
   const latency = stream && stream.latencyMs !== null ? `${stream.latencyMs.toFixed(0)} ms` : '-';
   $('stats').textContent = [
     `generation ${world.generation ?? '-'} (published ${world.published ?? '-'}) · ${world.objects} objects`,
-    `entries ${world.current.size} (${aggregates} aggregates)${world.stoppedBy ? ` · stopped by ${world.stoppedBy}` : ''}`,
+    `entries ${world.current.size} (${aggregates} aggregates, ${instances} instances)${world.stoppedBy ? ` · stopped by ${world.stoppedBy}` : ''}`,
     `draw calls ${stats.drawCalls} · triangles ${k(stats.triangles)}`,
     `downloaded ${mb(assets.bytesReceived)} · assets pending ${world.pendingAssets}`,
     `cache ${mb(assets.heldBytes)} of ${mb(assets.budgetBytes)}`,

@@ -69,6 +69,8 @@ pub fn plan_after(
     }
     planner.seed();
     let stopped_by = planner.refine();
+    planner.frontier = planner.frontier();
+    planner.share_models();
     planner.finish(stopped_by)
 }
 
@@ -123,6 +125,9 @@ pub struct Decisions {
     /// Every node whose instances refinement weighed against its aggregate (also of nodes
     /// refined later), and whether instances won.
     instances: Vec<(NodeId, bool)>,
+    /// The level of every object [`Planner::share_models`] looked at, which with the cut
+    /// refinement made decides what it switches.
+    examined: Vec<(ObjectId, u8)>,
     /// Every node with an impostor that refinement put in the cut (also those refined later),
     /// and the views it was charged for (0: none, its aggregate), with what deciding that
     /// again needs.
@@ -691,7 +696,19 @@ struct Planner<'a> {
     instance_choices: Vec<(NodeId, bool)>,
     /// Each object's level of detail once chosen, by tree id ([`UNCHOSEN`] before).
     chosen: Vec<std::cell::Cell<u8>>,
+    /// The objects [`Planner::share_models`] looked at, with their levels.
+    examined: Vec<(ObjectId, u8)>,
+    /// The nodes refinement left in the cut, but the one a budget refused (before
+    /// [`Planner::share_models`] draws some as instances: they are left all the same).
+    frontier: Vec<NodeId>,
 }
+
+/// How much more than an aggregate's bytes and draw calls the model levels it would need,
+/// beyond those the cut already has, may cost for [`Planner::share_models`] to draw its node
+/// as instances instead: every object then shows within `max_pixel_error`, while an aggregate
+/// was simplified for its node's nearest display distance. Chosen on the fidelity measure
+/// (`lab/results/reuse.md`).
+pub const SHARED_MODELS_FACTOR: f64 = 3.0;
 
 /// A level not chosen yet (levels are far fewer).
 const UNCHOSEN: u8 = u8::MAX;
@@ -743,6 +760,8 @@ impl<'a> Planner<'a> {
             impostor_choices: Vec::new(),
             instance_choices: Vec::new(),
             chosen: vec![std::cell::Cell::new(UNCHOSEN); tree.bvh.object_slots()],
+            examined: Vec::new(),
+            frontier: Vec::new(),
         }
     }
 
@@ -816,6 +835,111 @@ impl<'a> Planner<'a> {
             self.refined.push(node);
         }
         None
+    }
+
+    /// The nodes refinement left in the cut, but the one a budget refused.
+    fn frontier(&self) -> Vec<NodeId> {
+        self.units
+            .iter()
+            .filter_map(|u| match *u {
+                Unit::Node(n) if Some(n) != self.stopper => Some(n),
+                _ => None,
+            })
+            .collect()
+    }
+
+    /// The second look at the aggregates left in the cut, with what the client must still
+    /// download: an aggregate whose objects' model levels, less those the cut already has,
+    /// cost at most [`SHARED_MODELS_FACTOR`] times its bytes and its draw calls becomes
+    /// instances, if the budgets allow.
+    /// Each switch brings models that make others cheaper, so it repeats, nodes in id order,
+    /// until none switches. It depends only on the cut refinement made and the levels of the
+    /// objects it looks at, which [`Decisions`] keep for [`Plan::holds_at`].
+    fn share_models(&mut self) {
+        if !self.view.instances {
+            return;
+        }
+        loop {
+            let mut nodes: Vec<NodeId> = self
+                .units
+                .iter()
+                .filter_map(|u| match *u {
+                    Unit::Node(n) => Some(n),
+                    _ => None,
+                })
+                .filter(|&n| self.impostor_views(n) == 0)
+                .collect();
+            nodes.sort_unstable_by_key(|n| n.0);
+            let mut switched = false;
+            for node in nodes {
+                let Some(a) = self.aggregate(node) else {
+                    continue;
+                };
+                let limit = |v: u64| (v as f64 * SHARED_MODELS_FACTOR) as u64;
+                let (bytes, draw_calls) = (limit(a.bytes), limit(a.draw_calls));
+                if !self.cheaper_shared(node, bytes, draw_calls) {
+                    continue;
+                }
+                self.put(Unit::Node(node), -1);
+                self.put_shared(node, 1);
+                if self.over_budget().is_some() {
+                    self.put_shared(node, -1);
+                    self.put(Unit::Node(node), 1);
+                } else {
+                    switched = true;
+                }
+            }
+            if !switched {
+                return;
+            }
+        }
+    }
+
+    /// Whether `node`'s objects' model levels that the cut does not hold yet cost at most
+    /// `bytes` and `draw_calls` (given up as soon as they pass either).
+    fn cheaper_shared(&mut self, node: NodeId, bytes: u64, draw_calls: u64) -> bool {
+        let extracted: HashSet<ObjectId> = self.extracted(node).collect();
+        let bvh = &self.served.tree.bvh;
+        let mut under = Vec::new();
+        bvh.objects_under(node, &mut under);
+        let mut fresh: HashSet<(u64, u8)> = HashSet::new();
+        let (mut b, mut c) = (0, 0);
+        for o in under.into_iter().filter(|o| !extracted.contains(o)) {
+            let Some(model) = bvh.object(o).map(|r| r.model()) else {
+                return false;
+            };
+            let Some(m) = self.models.get(model as usize).and_then(Option::as_ref) else {
+                return false;
+            };
+            let level = self.level_of(o);
+            self.examined.push((o, level));
+            if self.assets.contains_key(&AssetKey::Model(model, level))
+                || !fresh.insert((model, level))
+            {
+                continue;
+            }
+            let l = m.level(level);
+            b += l.bytes;
+            c += l.draw_calls;
+            if b > bytes || c > draw_calls {
+                return false;
+            }
+        }
+        true
+    }
+
+    /// [`Planner::put`] of `Unit::Instances(node)` made by [`Planner::share_models`], which
+    /// [`Decisions`] do not record.
+    fn put_shared(&mut self, node: NodeId, sign: i64) {
+        if sign > 0 {
+            self.units.insert(Unit::Instances(node));
+        } else {
+            self.units.remove(&Unit::Instances(node));
+        }
+        let (impostors, instances) = (self.impostor_choices.len(), self.instance_choices.len());
+        self.charge_instances(node, sign);
+        self.impostor_choices.truncate(impostors);
+        self.instance_choices.truncate(instances);
     }
 
     /// What stands for `node` in the cut: its aggregate if the manifest has one, else its
@@ -1074,14 +1198,7 @@ impl<'a> Planner<'a> {
         let mut decisions = Decisions {
             min_solid_angle: self.min_solid_angle,
             refined: std::mem::take(&mut self.refined),
-            frontier: self
-                .units
-                .iter()
-                .filter_map(|u| match *u {
-                    Unit::Node(n) if Some(n) != self.stopper => Some(n),
-                    _ => None,
-                })
-                .collect(),
+            frontier: std::mem::take(&mut self.frontier),
             stopper: self.stopper,
             over_at_seed: self.over_at_seed,
             ordered: b.max_bytes.is_some()
@@ -1097,6 +1214,7 @@ impl<'a> Planner<'a> {
                 .collect(),
             levels: Vec::new(),
             instances: std::mem::take(&mut self.instance_choices),
+            examined: std::mem::take(&mut self.examined),
             impostors: {
                 let mut choices = std::mem::take(&mut self.impostor_choices);
                 choices.sort_unstable_by_key(|&(n, _)| n.0);
@@ -1505,10 +1623,12 @@ impl Plan {
             let held = Some(level);
             level_at(m, &r, eye, pixel_angle, self.view.max_pixel_error, held) == level
         });
-        if !levels_hold || self.decisions.instances.is_empty() {
+        let (instances, examined) = (&self.decisions.instances, &self.decisions.examined);
+        if !levels_hold || (instances.is_empty() && examined.is_empty()) {
             return levels_hold;
         }
-        // Weigh every node's instances again as planning with this plan held would.
+        // Choose levels and weigh every node's instances again as planning with this plan
+        // held would.
         let held = self.held_levels();
         let chooser = LevelChooser {
             tree,
@@ -1519,12 +1639,13 @@ impl Plan {
             held: &held,
             chosen: &[],
         };
-        self.decisions.instances.iter().all(|&(node, won)| {
-            let asset = self.decisions.nodes.get(node.0 as usize);
-            asset
-                .and_then(Option::as_ref)
-                .is_some_and(|a| chooser.instances_win(node, a) == won)
-        })
+        examined.iter().all(|&(o, level)| chooser.of(o) == level)
+            && instances.iter().all(|&(node, won)| {
+                let asset = self.decisions.nodes.get(node.0 as usize);
+                asset
+                    .and_then(Option::as_ref)
+                    .is_some_and(|a| chooser.instances_win(node, a) == won)
+            })
     }
 
     /// The wire entries, largest solid angle first (ties by id).
