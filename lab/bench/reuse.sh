@@ -5,7 +5,8 @@
 # default) and the same cut with every node as its aggregate, planned, rendered and measured in
 # the same run against the full world (2 street-level views, one overhead, one outside;
 # 960x540, 60 degrees, 4 rays per pixel; 0.001 sr, at most 4,000 entries). The city is measured
-# again under a budget of 2,000 draw calls. Tables go to OUT/<world>.md, JSON beside them.
+# again under a budget of 2,000 draw calls, and the village and the city with every object at
+# its own level of detail. Tables go to OUT/<world>.md, JSON beside them.
 # A world already generated in WORK is rebuilt (only what changed) unless marked .built.
 #
 #   cargo build --release -p horizon-server && cargo build --release -p horizon-lab
@@ -35,3 +36,9 @@ for world in village city city-distinct; do
 done
 "$L" fidelity "$WORK/city" --instances-peer --max-draw-calls 2000 \
   --json-out "$OUT/city_draw_calls_2000.json" > "$OUT/city_draw_calls_2000.md"
+# Each object at its own level (a triangle budget that never binds turns off shared levels):
+# fewer triangles, more assets and draw calls.
+for world in village city; do
+  "$L" fidelity "$WORK/$world" --instances-peer --max-triangles 1000000000000 \
+    --json-out "$OUT/${world}_own_levels.json" > "$OUT/${world}_own_levels.md"
+done

@@ -1417,30 +1417,31 @@ fn share_levels(items: &mut [Planned]) {
         match (&mut p.what, &mut p.key) {
             (Drawn::Object { model, .. }, Key::Object { level, .. }) => *level = finest[model],
             (Drawn::Instances(instances), _) => {
-                let shared: Vec<Instance> = instances
-                    .iter()
-                    .map(|i| Instance {
-                        level: finest[&i.model],
-                        ..i.clone()
-                    })
-                    .collect();
-                *instances = shared.into();
+                let set = |i: &mut Instance| i.level = finest[&i.model];
+                match Arc::get_mut(instances) {
+                    Some(own) => own.iter_mut().for_each(set),
+                    None => {
+                        let mut shared = instances.to_vec();
+                        shared.iter_mut().for_each(set);
+                        *instances = shared.into();
+                    }
+                }
             }
             _ => {}
         }
     }
 }
 
-/// What names an instances entry's content: FNV-1a over each object's id, the generation
-/// that placed it, its model and its level, in the order of the ids.
+/// What names an instances entry's content: a hash of each object's id, the generation that
+/// placed it, its model and its level, in the order of the ids (FNV-1a's offset and prime
+/// over whole words, each word's high bits folded down first so that they count too).
 fn instances_content(instances: &[Instance]) -> u64 {
     let mut h: u64 = 0xcbf2_9ce4_8422_2325;
     for i in instances {
         for word in [i.object, i.placed, i.model, u64::from(i.level)] {
-            for byte in word.to_le_bytes() {
-                h ^= u64::from(byte);
-                h = h.wrapping_mul(0x0000_0100_0000_01b3);
-            }
+            h ^= word ^ (word >> 29);
+            h = h.wrapping_mul(0x0000_0100_0000_01b3);
+            h ^= h >> 32;
         }
     }
     h
