@@ -221,7 +221,8 @@ mod tests {
         assert_eq!(query[2].1.parse::<f64>().ok(), Some(3.0e-7));
         assert_eq!(query[3].1.parse::<f64>().ok(), Some(0.5));
         assert_eq!(query[4].1, "false");
-        assert_eq!(query[5].1, "10");
+        assert_eq!(query[5].1, "false");
+        assert_eq!(query[6].1, "10");
     }
 
     #[test]

@@ -488,12 +488,13 @@ async fn walk_command(
         report.entries_removed
     ))?;
     out(&format!(
-        "assets: {} fetched ({} bytes: {} for objects, {} for aggregates, {} for impostors), {} from the cache, {} gone",
+        "assets: {} fetched ({} bytes: {} for objects, {} for aggregates, {} for impostors, {} for instances), {} from the cache, {} gone",
         report.assets_fetched,
         report.bytes_fetched,
         report.bytes_objects,
         report.bytes_aggregates,
         report.bytes_impostors,
+        report.bytes_instances,
         report.assets_cached,
         report.assets_gone
     ))?;

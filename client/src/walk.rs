@@ -163,6 +163,8 @@ pub struct WalkReport {
     pub bytes_aggregates: u64,
     /// For impostor entries (orthoview images).
     pub bytes_impostors: u64,
+    /// For instances entries (model levels shared by their placements).
+    pub bytes_instances: u64,
     /// Views a message answered (named in its `view`) whose cut was loaded whole before the
     /// walk ended: the samples of `view_latency_ms`.
     pub views_loaded: u64,
@@ -498,6 +500,9 @@ impl Walker {
                 let by_kind = match self.kinds.remove(&hash) {
                     Some(horizon_protocol::EntryKind::Object) => &mut self.report.bytes_objects,
                     Some(horizon_protocol::EntryKind::Impostor) => &mut self.report.bytes_impostors,
+                    Some(horizon_protocol::EntryKind::Instances) => {
+                        &mut self.report.bytes_instances
+                    }
                     _ => &mut self.report.bytes_aggregates,
                 };
                 *by_kind += f.downloaded;

@@ -83,9 +83,21 @@ async fn the_commands_run_against_the_service() {
     assert_eq!(printed, fresh);
     assert!(printed.entries.len() <= 20);
 
-    // stream: from outside the grid (a negative coordinate) inwards, every message checked.
+    // stream: from outside the grid (a negative coordinate) inwards, every message checked;
+    // every node as its aggregate, so that walking in refines them (with instances this
+    // grid of three reused boxes is two entries from anywhere).
     let out = client(args(&[
-        "stream", &base, "--eye", "-40,5,48", "--steps", "8", "--step", "12", "--wait", "0.5",
+        "stream",
+        &base,
+        "--eye",
+        "-40,5,48",
+        "--steps",
+        "8",
+        "--step",
+        "12",
+        "--wait",
+        "0.5",
+        "--no-instances",
         "--json",
     ]))
     .await;
