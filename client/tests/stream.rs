@@ -295,7 +295,7 @@ async fn checked_walk(base: &str, seed: u64, steps: usize, checked: &mut Checked
     // Even seeds with instances entries: on this grid of three reused boxes they draw nearly
     // the whole world in two entries, so odd seeds keep every node as its aggregate, which
     // walking refines and coarsens.
-    view.instances = seed % 2 == 0;
+    view.instances = seed.is_multiple_of(2);
     if rng.chance(0.4) {
         view.budgets.max_entries = Some(10 + rng.below(60) as u64);
     }
