@@ -204,6 +204,7 @@ pub fn bench_cut(
     views: usize,
     seed: u64,
     height: f64,
+    instances: bool,
 ) -> anyhow::Result<serde_json::Value> {
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .enable_all()
@@ -220,7 +221,7 @@ pub fn bench_cut(
             .map(|_| {
                 let x = f64::from(b.min[0]) + rng.unit_f64() * f64::from(b.max[0] - b.min[0]);
                 let z = f64::from(b.min[2]) + rng.unit_f64() * f64::from(b.max[2] - b.min[2]);
-                format!("{url}/v1/cut?eye={x:.2},{height},{z:.2}")
+                format!("{url}/v1/cut?eye={x:.2},{height},{z:.2}&instances={instances}")
             })
             .collect();
         let pid = find_server();
@@ -236,6 +237,7 @@ pub fn bench_cut(
         Ok(serde_json::json!({
             "objects": info.objects,
             "rate": rate,
+            "instances": instances,
             "seconds": seconds,
             "requests": requests,
             "errors": errors,

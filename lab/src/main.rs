@@ -226,6 +226,9 @@ enum Command {
         /// Eye height (y), metres.
         #[arg(long, default_value_t = 2.0)]
         height: f64,
+        /// Ask for cuts without instances entries (every node as its aggregate).
+        #[arg(long)]
+        no_instances: bool,
     },
     /// Derives Table 1's deduplication thresholds by the paper's procedure (renders from three
     /// directions, SSIM, every pair of models and perturbed variants) and writes table1.json
@@ -380,12 +383,15 @@ fn main() -> ExitCode {
             views,
             seed,
             height,
-        } => load::bench_cut(&url, rate, seconds, views, seed, height).and_then(|r| {
-            Ok(horizon_server::outln!(
-                "{}",
-                serde_json::to_string_pretty(&r)?
-            )?)
-        }),
+            no_instances,
+        } => {
+            load::bench_cut(&url, rate, seconds, views, seed, height, !no_instances).and_then(|r| {
+                Ok(horizon_server::outln!(
+                    "{}",
+                    serde_json::to_string_pretty(&r)?
+                )?)
+            })
+        }
         Command::BenchService {
             world,
             horizon,

@@ -29,6 +29,15 @@
 //! to the node). Only nodes the cut would draw with an aggregate become impostors, so every
 //! object that subtends `min_solid_angle` is still its own entry, and the cut stays complete.
 //!
+//! Instances (issue 26's reuse-aware cuts): a node the cut would draw with its aggregate is
+//! sent as its objects instead, each its model at its level, placed, where the models cost
+//! less than the aggregate. During refinement each object is charged its model level divided
+//! by the model's uses in the world (`LevelChooser::instances_win`); such a node is never
+//! refined. After refinement, each aggregate left is weighed again against the model levels
+//! the cut still lacks (`Planner::share_models`, within [`SHARED_MODELS_FACTOR`]). On a
+//! world of reused models the cut then downloads each model once, as naive instancing does;
+//! on distinct content the aggregates stay.
+//!
 //! Budgets count a shared asset once (bytes and draw calls) and triangles per entry, as a
 //! client drawing each asset's placements in one instanced batch spends them.
 //!
@@ -292,7 +301,7 @@ pub enum Key {
     Instances {
         /// The node.
         node: u32,
-        /// A hash of its objects, their placements and their levels ([`instances_content`]).
+        /// A hash of its objects, their placements and their levels (`instances_content`).
         content: u64,
     },
 }
@@ -704,7 +713,7 @@ struct Planner<'a> {
 }
 
 /// How much more than an aggregate's bytes and draw calls the model levels it would need,
-/// beyond those the cut already has, may cost for [`Planner::share_models`] to draw its node
+/// beyond those the cut already has, may cost for the planner's second pass to draw its node
 /// as instances instead: every object then shows within `max_pixel_error`, while an aggregate
 /// was simplified for its node's nearest display distance. Chosen on the fidelity measure
 /// (`lab/results/reuse.md`).

@@ -1,0 +1,40 @@
+#!/usr/bin/env bash
+# `GET /v1/cut` with and without instances entries under the same open-loop load, one server:
+# `horizon-lab bench-cut` at seeded street-level eyes on a built world (the city: `horizon-lab
+# gen world city DIR --seed 1` then `horizon build DIR`), each rate with instances then
+# without, back to back. Server and load share this machine. JSON reports go to OUT/.
+#
+#   cargo build --release -p horizon-server && cargo build --release -p horizon-lab
+#   bash lab/bench/instances_load.sh /tmp/city lab/results/reuse/load
+set -euo pipefail
+WORLD=${1:?a built world}
+OUT=${2:-lab/results/reuse/load}
+RATES=${RATES:-"5 20 50"}
+SECONDS_EACH=${SECONDS_EACH:-20}
+H=${H:-target/release/horizon}
+L=${L:-target/release/horizon-lab}
+mkdir -p "$OUT"
+work=$(mktemp -d)
+pid=
+cleanup() {
+  if [ -n "$pid" ]; then kill "$pid" 2>/dev/null || true; wait "$pid" 2>/dev/null || true; fi
+  rm -rf "$work"
+}
+trap cleanup EXIT
+"$H" serve "$WORLD" --listen 127.0.0.1:0 > "$work/serve.out" 2> "$work/serve.log" &
+pid=$!
+for _ in $(seq 600); do
+  if grep -q "^listening on " "$work/serve.out" 2>/dev/null; then break; fi
+  sleep 0.2
+done
+url=$(sed -n 's/^listening on //p' "$work/serve.out" | head -1)
+[ -n "$url" ] || { echo "horizon serve did not start" >&2; cat "$work/serve.log" >&2; exit 1; }
+for rate in $RATES; do
+  for mode in instances aggregates; do
+    flag=""
+    [ "$mode" = aggregates ] && flag="--no-instances"
+    echo "bench-cut at $rate/s, $mode" >&2
+    "$L" bench-cut "$url" --rate "$rate" --seconds "$SECONDS_EACH" $flag > "$OUT/cut_${mode}_${rate}.json"
+  done
+done
+echo "wrote $OUT" >&2
