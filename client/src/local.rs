@@ -6,7 +6,7 @@
 
 use std::collections::{BTreeSet, HashMap, HashSet};
 
-use horizon_protocol::{CutResponse, Entry, ServerMessage, StoppedBy};
+use horizon_protocol::{CutResponse, Entry, EntryKind, ServerMessage, StoppedBy};
 
 /// A cut kept by applying a stream's messages: the entries by id, and what the last message
 /// said of the world.
@@ -329,19 +329,22 @@ pub fn check_cut(cut: &CutResponse) -> Result<(), Incomplete> {
     }
 }
 
-/// An entry id without its level of detail: `o:<id>@<placed>/<level>` -> `o:<id>@<placed>`.
+/// An entry id without its level of detail: `o:<id>@<placed>/<level>` -> `o:<id>@<placed>`,
+/// `n:<node>@i<content>/<levels>` -> `n:<node>@i<content>`.
 fn without_level(id: &str) -> &str {
-    match id.strip_prefix("o:").and(id.rfind('/')) {
+    let levelled = id.starts_with("o:") || id.contains("@i");
+    match id.rfind('/').filter(|_| levelled) {
         Some(slash) => &id[..slash],
         None => id,
     }
 }
 
 /// The first field in which two entries of the same content differ, by name; an object's
-/// level is not compared, and what follows from it (id, assets, placements, bytes,
-/// triangles, draw calls) only when the levels agree.
+/// level (an instances entry's levels) is not compared, and what follows from it (id,
+/// assets, placements, bytes, triangles, draw calls) only when the levels agree.
 fn first_difference(a: &Entry, b: &Entry) -> Option<String> {
-    let at_level = a.level == b.level;
+    // Instances are at the same levels when their ids, which hash the levels, agree.
+    let at_level = a.level == b.level && (a.kind != EntryKind::Instances || a.id == b.id);
     let fields: [(&str, bool); 11] = [
         ("id", !at_level || a.id == b.id),
         ("kind", a.kind == b.kind),

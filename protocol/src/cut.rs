@@ -245,8 +245,10 @@ pub struct Placement {
 pub struct Entry {
     /// Names one content, never two: `o:<object id>@<generation that placed it>` for an
     /// object, `n:<node id>@<asset hash>` for an aggregate, `n:<node id>@<impostor key>.<views
-    /// sent, a bit each, hex>` for an impostor, `n:<node id>@i<16 hex digits>` for instances
-    /// (a hash of the objects, their placements and their levels).
+    /// sent, a bit each, hex>` for an impostor, `n:<node id>@i<16 hex digits>/<16 hex
+    /// digits>` for instances (a hash of the objects and their placements, then one of their
+    /// levels of detail: like an object's `/<level>`, the part a stream's hysteresis may keep
+    /// apart from a fresh cut).
     pub id: String,
     /// What it is.
     pub kind: EntryKind,

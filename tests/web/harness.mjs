@@ -120,6 +120,7 @@ export async function cutIds(page, base) {
     pixel_solid_angle: String(v.pixel_solid_angle),
     max_pixel_error: String(v.max_pixel_error),
     impostors: String(v.impostors),
+    instances: String(v.instances),
     max_entries: String(v.budgets.max_entries),
   });
   const response = await fetch(`${base}/v1/cut?${q}`);
@@ -127,9 +128,10 @@ export async function cutIds(page, base) {
   return (await response.json()).entries.map((e) => withoutLevel(e.id)).sort();
 }
 
-/** An entry id without its level of detail. */
+/** An entry id without its level of detail: an object's `/<level>`, instances' `/<levels hash>`. */
 export function withoutLevel(id) {
-  return id.startsWith('o:') ? id.replace(/\/\d+$/, '') : id;
+  if (id.startsWith('o:')) return id.replace(/\/\d+$/, '');
+  return id.includes('@i') ? id.replace(/\/[0-9a-f]+$/, '') : id;
 }
 
 /** Moves the viewer to a view and waits until it draws exactly the one-shot cut there. */

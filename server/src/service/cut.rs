@@ -301,8 +301,10 @@ pub enum Key {
     Instances {
         /// The node.
         node: u32,
-        /// A hash of its objects, their placements and their levels (`instances_content`).
+        /// A hash of its objects and their placements (`instances_content`).
         content: u64,
+        /// A hash of its objects' levels of detail.
+        levels: u64,
     },
 }
 
@@ -1309,6 +1311,7 @@ impl<'a> Planner<'a> {
                         key: Key::Instances {
                             node: node.0,
                             content: 0,
+                            levels: 0,
                         },
                         covers: instances.len() as u64,
                         what: Drawn::Instances(instances.into()),
@@ -1379,10 +1382,15 @@ impl<'a> Planner<'a> {
             share_levels(&mut items);
         }
         for p in &mut items {
-            if let (Key::Instances { content, .. }, Drawn::Instances(instances)) =
-                (&mut p.key, &p.what)
+            if let (
+                Key::Instances {
+                    content, levels, ..
+                },
+                Drawn::Instances(instances),
+            ) = (&mut p.key, &p.what)
             {
-                *content = instances_content(instances);
+                *content = instances_content(instances, |i| [i.object, i.placed, i.model]);
+                *levels = instances_content(instances, |i| [u64::from(i.level)]);
             }
         }
         Plan {
@@ -1441,13 +1449,17 @@ fn share_levels(items: &mut [Planned]) {
     }
 }
 
-/// What names an instances entry's content: a hash of each object's id, the generation that
-/// placed it, its model and its level, in the order of the ids (FNV-1a's offset and prime
-/// over whole words, each word's high bits folded down first so that they count too).
-fn instances_content(instances: &[Instance]) -> u64 {
+/// What names an instances entry's content: a hash of `words` of each instance, in the order
+/// of the ids (FNV-1a's offset and prime over whole words, each word's high bits folded down
+/// first so that they count too). The objects, the generations that placed them and their
+/// models name the content; their levels, hashed apart, name its level of detail.
+fn instances_content<const N: usize>(
+    instances: &[Instance],
+    words: impl Fn(&Instance) -> [u64; N],
+) -> u64 {
     let mut h: u64 = 0xcbf2_9ce4_8422_2325;
     for i in instances {
-        for word in [i.object, i.placed, i.model, u64::from(i.level)] {
+        for word in words(i) {
             h ^= word ^ (word >> 29);
             h = h.wrapping_mul(0x0000_0100_0000_01b3);
             h ^= h >> 32;
@@ -1696,7 +1708,11 @@ impl Plan {
                 let key = self.impostor(p).map_or("", |i| i.key.as_str());
                 format!("n:{node}@{key}.{views:03x}")
             }
-            Key::Instances { node, content } => format!("n:{node}@i{content:016x}"),
+            Key::Instances {
+                node,
+                content,
+                levels,
+            } => format!("n:{node}@i{content:016x}/{levels:016x}"),
         }
     }
 
