@@ -16,7 +16,9 @@ cd "$(dirname "$0")/.."
 tools="${HORIZON_TOOLS:-$HOME/.cache/horizon-tools}"
 mkdir -p "$tools"
 
-step() { printf '\n== %s\n' "$*"; }
+# Each step also says how much disk is left: CI's disk is small, and a full one fails a build
+# with an error far from its cause.
+step() { printf '\n== %s (disk free: %s)\n' "$*" "$(df -h . | awk 'NR == 2 { print $4 }')"; }
 
 step "installing reference tools into $tools (once)"
 if [ ! -x "$tools/venv/bin/python" ]; then
@@ -60,7 +62,10 @@ step "cargo test"
 cargo test --workspace --quiet
 
 step "horizon serve killed with SIGKILL under mutations, 20 times (ignored by cargo test)"
-cargo test --quiet -p horizon-server --test kill -- --ignored
+# Selected with the whole workspace so that features unify as in the run above and nothing is
+# rebuilt: `-p horizon-server` alone would build every crate a second time, and CI's disk is
+# small.
+cargo test --workspace --quiet --test kill -- --ignored
 
 step "reference checks (Khronos glTF-Validator, trimesh)"
 # The product under test is the release horizon, built alone so that it is exactly what ships

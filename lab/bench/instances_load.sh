@@ -1,8 +1,10 @@
 #!/usr/bin/env bash
-# `GET /v1/cut` with and without instances entries under the same open-loop load, one server:
-# `horizon-lab bench-cut` at seeded street-level eyes on a built world (the city: `horizon-lab
-# gen world city DIR --seed 1` then `horizon build DIR`), each rate with instances then
-# without, back to back. Server and load share this machine. JSON reports go to OUT/.
+# Instances entries under load, on one server and a built world (the city: `horizon-lab gen
+# world city DIR --seed 1` then `horizon build DIR`), each figure with instances then without,
+# back to back:
+#   1. `GET /v1/cut` at seeded street-level eyes, open loop (`horizon-lab bench-cut`);
+#   2. standing queries at 10 Hz per viewer, no mutations (`horizon-lab load`).
+# Server and load share this machine. JSON reports go to OUT/.
 #
 #   cargo build --release -p horizon-server && cargo build --release -p horizon-lab
 #   bash lab/bench/instances_load.sh /tmp/city lab/results/reuse/load
@@ -10,6 +12,7 @@ set -euo pipefail
 WORLD=${1:?a built world}
 OUT=${2:-lab/results/reuse/load}
 RATES=${RATES:-"5 20 50"}
+VIEWERS=${VIEWERS:-"10 50"}
 SECONDS_EACH=${SECONDS_EACH:-20}
 H=${H:-target/release/horizon}
 L=${L:-target/release/horizon-lab}
@@ -35,6 +38,15 @@ for rate in $RATES; do
     [ "$mode" = aggregates ] && flag="--no-instances"
     echo "bench-cut at $rate/s, $mode" >&2
     "$L" bench-cut "$url" --rate "$rate" --seconds "$SECONDS_EACH" $flag > "$OUT/cut_${mode}_${rate}.json"
+  done
+done
+for viewers in $VIEWERS; do
+  for mode in instances aggregates; do
+    flag=""
+    [ "$mode" = aggregates ] && flag="--no-instances"
+    echo "load: $viewers viewers at 10 Hz, $mode" >&2
+    "$L" load "$url" --viewers "$viewers" --hz 10 --duration "$SECONDS_EACH" --pid "$pid" $flag --json \
+      > "$OUT/stream_${mode}_${viewers}.json"
   done
 done
 echo "wrote $OUT" >&2

@@ -63,6 +63,9 @@ pub struct Args {
     /// The views' max_entries.
     #[arg(long, default_value_t = horizon_protocol::DEFAULT_MAX_ENTRIES)]
     pub max_entries: u64,
+    /// Views without instances entries (every node as its aggregate).
+    #[arg(long)]
+    pub no_instances: bool,
 }
 
 /// The report.
@@ -301,6 +304,7 @@ async fn load(args: &Args) -> anyhow::Result<Report> {
                 max_entries: Some(args.max_entries),
                 ..Budgets::default()
             },
+            instances: !args.no_instances,
             ..View::at(walker.eye())
         };
         tasks.push(tokio::spawn(viewer(

@@ -4,7 +4,7 @@
 //! publishes.
 //!
 //! Slow (20 kills, then a full rebuild in a debug build), so `#[ignore]`d: `tests/run.sh` and
-//! `cargo test -p horizon-server --test kill -- --ignored` run it. It builds nothing itself:
+//! `cargo test --workspace --test kill -- --ignored` run it. It builds nothing itself:
 //! it drives the `horizon` binary cargo built for the tests.
 //!
 //! What a request's outcome proves:
