@@ -2,17 +2,20 @@
 # Instances entries under load, on one server and a built world (the city: `horizon-lab gen
 # world city DIR --seed 1` then `horizon build DIR`), each figure with instances then without,
 # back to back:
-#   1. `GET /v1/cut` at seeded street-level eyes, open loop (`horizon-lab bench-cut`);
+#   1. `GET /v1/cut` at seeded street-level eyes, open loop (`horizon-lab bench-cut`), plain
+#      JSON and zstd-compressed (`Accept-Encoding: zstd`, as the viewer's browser asks);
 #   2. standing queries at 10 Hz per viewer, no mutations (`horizon-lab load`).
-# Server and load share this machine. JSON reports go to OUT/.
+# Server and load share this machine. JSON reports go to OUT/. RATES, ENCODINGS and VIEWERS
+# choose the figures (empty: none of that kind); H and L the binaries.
 #
 #   cargo build --release -p horizon-server && cargo build --release -p horizon-lab
 #   bash lab/bench/instances_load.sh /tmp/city lab/results/reuse/load
 set -euo pipefail
 WORLD=${1:?a built world}
 OUT=${2:-lab/results/reuse/load}
-RATES=${RATES:-"5 20 50"}
-VIEWERS=${VIEWERS:-"10 50"}
+RATES=${RATES-"5 20 50"}
+ENCODINGS=${ENCODINGS-"identity zstd"}
+VIEWERS=${VIEWERS-"10 50"}
 SECONDS_EACH=${SECONDS_EACH:-20}
 H=${H:-target/release/horizon}
 L=${L:-target/release/horizon-lab}
@@ -32,12 +35,16 @@ for _ in $(seq 600); do
 done
 url=$(sed -n 's/^listening on //p' "$work/serve.out" | head -1)
 [ -n "$url" ] || { echo "horizon serve did not start" >&2; cat "$work/serve.log" >&2; exit 1; }
-for rate in $RATES; do
-  for mode in instances aggregates; do
-    flag=""
-    [ "$mode" = aggregates ] && flag="--no-instances"
-    echo "bench-cut at $rate/s, $mode" >&2
-    "$L" bench-cut "$url" --rate "$rate" --seconds "$SECONDS_EACH" $flag > "$OUT/cut_${mode}_${rate}.json"
+for encoding in $ENCODINGS; do
+  for rate in $RATES; do
+    for mode in instances aggregates; do
+      flag=""
+      [ "$mode" = aggregates ] && flag="--no-instances"
+      [ "$encoding" != identity ] && flag="$flag --accept-encoding $encoding"
+      echo "bench-cut at $rate/s, $mode, $encoding" >&2
+      "$L" bench-cut "$url" --rate "$rate" --seconds "$SECONDS_EACH" $flag \
+        > "$OUT/cut_${mode}_${encoding}_${rate}.json"
+    done
   done
 done
 for viewers in $VIEWERS; do

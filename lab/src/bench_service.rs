@@ -200,8 +200,13 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                 .collect(),
             _ => vec![format!("{}/v1/world", server.url)],
         };
-        let (requests, errors, latency) =
-            runtime.block_on(open_loop(urls, args.rate, args.load_seconds, args.seed))?;
+        let (requests, errors, latency) = runtime.block_on(open_loop(
+            urls,
+            args.rate,
+            args.load_seconds,
+            args.seed,
+            None,
+        ))?;
         assets.push(LoadRun {
             target: target.into(),
             rate: args.rate,
@@ -457,12 +462,14 @@ async fn sustain(
 
 /// An open-loop load: requests scheduled at `rate` per second for `seconds`, each sent at its
 /// time whatever the ones before are doing; latency from the scheduled time to the body's
-/// end. Returns (requests, errors, latencies).
+/// end. Each request sends `accept_encoding`, if given, as `Accept-Encoding` (the body is read
+/// as it comes, not decoded). Returns (requests, errors, latencies).
 pub(crate) async fn open_loop(
     urls: Vec<String>,
     rate: u64,
     seconds: u64,
     seed: u64,
+    accept_encoding: Option<&str>,
 ) -> anyhow::Result<(u64, u64, Percentiles)> {
     let client = reqwest::Client::builder()
         .pool_max_idle_per_host(256)
@@ -477,10 +484,13 @@ pub(crate) async fn open_loop(
     for k in 0..total {
         let scheduled = started + interval * k as u32;
         tokio::time::sleep_until(scheduled.into()).await;
-        let url = urls[rng.below(urls.len())].clone();
-        let (client, histogram, errors) = (client.clone(), histogram.clone(), errors.clone());
+        let mut request = client.get(&urls[rng.below(urls.len())]);
+        if let Some(encoding) = accept_encoding {
+            request = request.header(reqwest::header::ACCEPT_ENCODING, encoding);
+        }
+        let (histogram, errors) = (histogram.clone(), errors.clone());
         tasks.push(tokio::spawn(async move {
-            let ok = match client.get(&url).send().await {
+            let ok = match request.send().await {
                 Ok(r) if r.status().is_success() => r.bytes().await.is_ok(),
                 _ => false,
             };

@@ -91,6 +91,10 @@ pub struct Report {
     pub deltas_per_second: f64,
     /// Bytes received per second per viewer.
     pub bytes_per_second_per_viewer: f64,
+    /// Placements received per second per viewer, in the entries resets and deltas added (one
+    /// per object or aggregate, one per object of an instances entry). An instances entry
+    /// whose levels change is resent whole, so this counts what level changes cost.
+    pub placements_per_second_per_viewer: f64,
     /// Views the server replaced by a later one before planning them (from `/metrics`).
     pub coalesced: Option<u64>,
     /// Mutations that got a 2xx.
@@ -138,6 +142,7 @@ struct Tally {
     views: AtomicU64,
     messages: AtomicU64,
     bytes: AtomicU64,
+    placements: AtomicU64,
     errors: AtomicU64,
     mutations_ok: AtomicU64,
     samples: Mutex<Vec<String>>,
@@ -179,11 +184,12 @@ pub fn print(r: &Report, json: bool) -> anyhow::Result<()> {
         r.coalesced.map_or("?".into(), |c| c.to_string())
     )?;
     outln!(
-        "first cut: p50 {:.0} ms, p99 {:.0} ms; {:.0} deltas/s; {:.0} B/s per viewer; {} mutations; {} errors {:?}",
+        "first cut: p50 {:.0} ms, p99 {:.0} ms; {:.0} deltas/s; {:.0} B/s and {:.0} placements/s per viewer; {} mutations; {} errors {:?}",
         r.first_cut_ms.p50,
         r.first_cut_ms.p99,
         r.deltas_per_second,
         r.bytes_per_second_per_viewer,
+        r.placements_per_second_per_viewer,
         r.mutations_ok,
         r.errors,
         r.error_samples
@@ -200,6 +206,7 @@ pub fn print(r: &Report, json: bool) -> anyhow::Result<()> {
 
 /// `GET /v1/cut` at `rate` requests a second for `seconds`, open loop, at `views` seeded
 /// street-level eyes: (requests, errors, latency percentiles in ms).
+#[allow(clippy::too_many_arguments)]
 pub fn bench_cut(
     url: &str,
     rate: u64,
@@ -208,6 +215,7 @@ pub fn bench_cut(
     seed: u64,
     height: f64,
     instances: bool,
+    accept_encoding: Option<&str>,
 ) -> anyhow::Result<serde_json::Value> {
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .enable_all()
@@ -231,7 +239,7 @@ pub fn bench_cut(
         let cpu_before = pid.and_then(cpu_seconds);
         let started = Instant::now();
         let (requests, errors, p) =
-            crate::bench_service::open_loop(urls, rate, seconds, seed).await?;
+            crate::bench_service::open_loop(urls, rate, seconds, seed, accept_encoding).await?;
         let wall = started.elapsed().as_secs_f64();
         let cpu = pid
             .and_then(cpu_seconds)
@@ -241,6 +249,7 @@ pub fn bench_cut(
             "objects": info.objects,
             "rate": rate,
             "instances": instances,
+            "accept_encoding": accept_encoding,
             "seconds": seconds,
             "requests": requests,
             "errors": errors,
@@ -365,6 +374,9 @@ async fn load(args: &Args) -> anyhow::Result<Report> {
         views_sent: tally.views.load(Ordering::Relaxed),
         deltas_per_second: messages as f64 / seconds,
         bytes_per_second_per_viewer: bytes as f64 / seconds / args.viewers.max(1) as f64,
+        placements_per_second_per_viewer: tally.placements.load(Ordering::Relaxed) as f64
+            / seconds
+            / args.viewers.max(1) as f64,
         coalesced: metrics_before
             .zip(metrics_after)
             .map(|(a, b)| b.saturating_sub(a)),
@@ -525,9 +537,19 @@ async fn viewer(
                     tally.bytes.fetch_add(t.len() as u64, Ordering::Relaxed);
                 }
                 match serde_json::from_str::<ServerMessage>(&t) {
-                    Ok(ServerMessage::Reset { seq, view: v, .. } | ServerMessage::Delta { seq, view: v, .. }) => {
+                    Ok(m @ (ServerMessage::Reset { .. } | ServerMessage::Delta { .. })) => {
+                        let (seq, v, placements) = match &m {
+                            ServerMessage::Reset { seq, view, entries, .. } => {
+                                (*seq, *view, entries.iter().map(|e| e.placements.len()).sum())
+                            }
+                            ServerMessage::Delta { seq, view, add, .. } => {
+                                (*seq, *view, add.iter().map(|a| a.entry.placements.len()).sum::<usize>())
+                            }
+                            ServerMessage::Error { .. } => continue,
+                        };
                         if counting {
                             tally.messages.fetch_add(1, Ordering::Relaxed);
+                            tally.placements.fetch_add(placements as u64, Ordering::Relaxed);
                         }
                         if v > answered {
                             if let (Some(at), true) = (sent.get(&v), counting) {

@@ -229,6 +229,10 @@ enum Command {
         /// Ask for cuts without instances entries (every node as its aggregate).
         #[arg(long)]
         no_instances: bool,
+        /// Send this `Accept-Encoding` (`zstd`, `gzip`), as a browser does; by default none,
+        /// and the server sends plain JSON.
+        #[arg(long)]
+        accept_encoding: Option<String>,
     },
     /// Derives Table 1's deduplication thresholds by the paper's procedure (renders from three
     /// directions, SSIM, every pair of models and perturbed variants) and writes table1.json
@@ -384,8 +388,14 @@ fn main() -> ExitCode {
             seed,
             height,
             no_instances,
+            accept_encoding,
         } => {
-            load::bench_cut(&url, rate, seconds, views, seed, height, !no_instances).and_then(|r| {
+            let instances = !no_instances;
+            let encoding = accept_encoding.as_deref();
+            load::bench_cut(
+                &url, rate, seconds, views, seed, height, instances, encoding,
+            )
+            .and_then(|r| {
                 Ok(horizon_server::outln!(
                     "{}",
                     serde_json::to_string_pretty(&r)?

@@ -65,7 +65,9 @@ pub fn plan(served: &Served<'_>, models: &AssetTable, view: &View) -> Plan {
 }
 
 /// [`plan`] for a client that holds `held`: an object keeps the level of detail it has there
-/// while that level stays within [`LEVEL_MARGIN`] of the level it would be given afresh.
+/// while that level stays within [`LEVEL_MARGIN`] of the level it would be given afresh, and
+/// a model the level its objects share there while that is fine enough and at most
+/// [`MODEL_LEVEL_SLACK`] finer than needed (`share_levels`).
 pub fn plan_after(
     served: &Served<'_>,
     models: &AssetTable,
@@ -75,6 +77,7 @@ pub fn plan_after(
     let mut planner = Planner::new(served, models, view);
     if let Some(held) = held {
         planner.held_levels = held.held_levels();
+        planner.held_model_levels = held.model_levels();
     }
     planner.seed();
     let stopped_by = planner.refine();
@@ -378,6 +381,11 @@ pub struct LevelAsset {
 /// threshold divided by the margin, and a held level is given up only once it exceeds the
 /// threshold times the margin. Moving a little never flips levels back and forth.
 pub const LEVEL_MARGIN: f32 = 1.25;
+
+/// How many levels finer than its objects need a model may stay drawn at in a stream, where
+/// the client holds that level already ([`share_levels`]): one level has about four times
+/// the triangles of the next.
+pub const MODEL_LEVEL_SLACK: u8 = 1;
 
 impl ModelAsset {
     /// The level to draw an object of this model with, seen from `distance` (to the
@@ -699,6 +707,8 @@ struct Planner<'a> {
     over_at_seed: bool,
     /// The level of detail each object has in the plan a client holds.
     held_levels: HashMap<u64, u8>,
+    /// The level each model is drawn at in the plan a client holds (`share_levels`).
+    held_model_levels: HashMap<u64, u8>,
     /// The angle of one pixel, radians.
     pixel_angle: f32,
     /// Each node with an impostor put in the cut, and the views it was charged for.
@@ -767,6 +777,7 @@ impl<'a> Planner<'a> {
             stopper: None,
             over_at_seed: false,
             held_levels: HashMap::new(),
+            held_model_levels: HashMap::new(),
             pixel_angle: pixel_angle(view),
             impostor_choices: Vec::new(),
             instance_choices: Vec::new(),
@@ -1204,6 +1215,61 @@ impl<'a> Planner<'a> {
         node_worst_case(&self.served.tree.bvh, node, self.eye)
     }
 
+    /// The instances entry of a node: its objects but those `extracted` (pending, their own
+    /// entries) or whose model the table lacks (counted in `missing`); none if that leaves
+    /// nothing.
+    fn instances_item(
+        &self,
+        node: NodeId,
+        extracted: &HashSet<ObjectId>,
+        missing: &std::cell::Cell<usize>,
+    ) -> Option<Planned> {
+        let tree = self.served.tree;
+        let n = tree.bvh.node(node)?;
+        let mut under = Vec::new();
+        tree.bvh.objects_under(node, &mut under);
+        let mut instances: Vec<Instance> = under
+            .into_iter()
+            .filter(|o| !extracted.contains(o))
+            .filter_map(|o| {
+                let r = tree.bvh.object(o)?;
+                let model = r.model();
+                if self.models.get(model as usize).is_none_or(Option::is_none) {
+                    missing.set(missing.get() + 1);
+                    return None;
+                }
+                let level = self.level_of(o);
+                Some(Instance {
+                    object: tree.world_id(o)?,
+                    tree: o,
+                    placed: tree.placed_at(o),
+                    model,
+                    transform: r.transform(),
+                    needed: level,
+                    level,
+                })
+            })
+            .collect();
+        if instances.is_empty() {
+            return None;
+        }
+        instances.sort_unstable_by_key(|i| i.object);
+        let sphere = n.outer_sphere();
+        Some(Planned {
+            key: Key::Instances {
+                node: node.0,
+                content: 0,
+                levels: 0,
+            },
+            covers: instances.len() as u64,
+            what: Drawn::Instances(instances.into()),
+            pending: false,
+            center: sphere.centre.to_array(),
+            radius: sphere.radius,
+            solid_angle: self.worst_case(node).unwrap_or(0.0),
+        })
+    }
+
     fn finish(mut self, stopped_by: Option<StoppedBy>) -> Plan {
         let b = &self.budgets;
         let mut decisions = Decisions {
@@ -1275,51 +1341,7 @@ impl<'a> Planner<'a> {
                 Unit::Instances(node) => {
                     let extracted: HashSet<ObjectId> = self.extracted(node).collect();
                     items.extend(extracted.iter().filter_map(|&o| object_item(o, true)));
-                    let Some(n) = tree.bvh.node(node) else {
-                        continue;
-                    };
-                    let mut under = Vec::new();
-                    tree.bvh.objects_under(node, &mut under);
-                    let mut instances: Vec<Instance> = under
-                        .into_iter()
-                        .filter(|o| !extracted.contains(o))
-                        .filter_map(|o| {
-                            let r = tree.bvh.object(o)?;
-                            let model = r.model();
-                            if self.models.get(model as usize).is_none_or(Option::is_none) {
-                                missing.set(missing.get() + 1);
-                                return None;
-                            }
-                            let level = self.level_of(o);
-                            Some(Instance {
-                                object: tree.world_id(o)?,
-                                tree: o,
-                                placed: tree.placed_at(o),
-                                model,
-                                transform: r.transform(),
-                                needed: level,
-                                level,
-                            })
-                        })
-                        .collect();
-                    if instances.is_empty() {
-                        continue;
-                    }
-                    instances.sort_unstable_by_key(|i| i.object);
-                    let sphere = n.outer_sphere();
-                    items.push(Planned {
-                        key: Key::Instances {
-                            node: node.0,
-                            content: 0,
-                            levels: 0,
-                        },
-                        covers: instances.len() as u64,
-                        what: Drawn::Instances(instances.into()),
-                        pending: false,
-                        center: sphere.centre.to_array(),
-                        radius: sphere.radius,
-                        solid_angle: self.worst_case(node).unwrap_or(0.0),
-                    });
+                    items.extend(self.instances_item(node, &extracted, &missing));
                 }
                 Unit::Node(node) => {
                     let extracted: Vec<ObjectId> = self.extracted(node).collect();
@@ -1379,7 +1401,14 @@ impl<'a> Planner<'a> {
             }
         }
         if self.budgets.max_triangles.is_none() {
-            share_levels(&mut items);
+            // A held model level may cost more bytes than the levels charged: kept only
+            // where no byte budget could be overrun by it.
+            let none = HashMap::new();
+            let held = match self.budgets.max_bytes {
+                None => &self.held_model_levels,
+                Some(_) => &none,
+            };
+            share_levels(&mut items, held);
         }
         for p in &mut items {
             if let (
@@ -1413,7 +1442,12 @@ impl<'a> Planner<'a> {
 /// and draw calls only fall by it (one asset per model instead of one per level used), and
 /// its triangles stay at most those of the cut without levels; under a triangle budget the
 /// planner leaves every object at its own level.
-fn share_levels(items: &mut [Planned]) {
+///
+/// For a client that holds a plan, a model keeps the level it is `held` at while that level
+/// is at least as fine as the finest needed and at most [`MODEL_LEVEL_SLACK`] levels finer:
+/// the client has it already, and every placement of the model would be resent with a new
+/// level (a stream's cost of a model's level is its number of copies in the cut).
+fn share_levels(items: &mut [Planned], held: &HashMap<u64, u8>) {
     let mut finest: HashMap<u64, u8> = HashMap::new();
     let mut need = |model: u64, needed: u8| {
         let f = finest.entry(model).or_insert(needed);
@@ -1428,6 +1462,13 @@ fn share_levels(items: &mut [Planned]) {
                 }
             }
             Drawn::Aggregate | Drawn::Impostor => {}
+        }
+    }
+    for (model, f) in finest.iter_mut() {
+        if let Some(&h) = held.get(model) {
+            if h <= *f && *f - h <= MODEL_LEVEL_SLACK {
+                *f = h;
+            }
         }
     }
     for p in items.iter_mut() {
@@ -1821,6 +1862,26 @@ impl Plan {
         }
     }
 
+    /// The level each model is drawn at (the finest, where a plan under a triangle budget
+    /// draws a model at several): what [`plan_after`] holds shared levels to.
+    fn model_levels(&self) -> HashMap<u64, u8> {
+        let mut levels: HashMap<u64, u8> = HashMap::new();
+        let mut at = |model: u64, level: u8| {
+            let l = levels.entry(model).or_insert(level);
+            *l = (*l).min(level);
+        };
+        for p in &self.items {
+            match (&p.what, p.key) {
+                (Drawn::Object { model, .. }, Key::Object { level, .. }) => at(*model, level),
+                (Drawn::Instances(instances), _) => {
+                    instances.iter().for_each(|i| at(i.model, i.level));
+                }
+                _ => {}
+            }
+        }
+        levels
+    }
+
     /// The levels of detail its objects need, by world id: what [`plan_after`] holds them
     /// to.
     fn held_levels(&self) -> HashMap<u64, u8> {
@@ -2042,6 +2103,77 @@ impl Plan {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Objects of model 7 that need levels 2 and 3, one alone and one as an instance.
+    fn needing_2_and_3() -> Vec<Planned> {
+        let object = |object: u64, needed: u8| Planned {
+            key: Key::Object {
+                object,
+                placed: 1,
+                level: needed,
+            },
+            what: Drawn::Object {
+                model: 7,
+                transform: Affine3A::IDENTITY,
+                needed,
+            },
+            covers: 1,
+            pending: false,
+            center: [0.0; 3],
+            radius: 1.0,
+            solid_angle: 0.0,
+        };
+        let instance = Instance {
+            object: 2,
+            tree: ObjectId(2),
+            placed: 1,
+            model: 7,
+            transform: Affine3A::IDENTITY,
+            needed: 3,
+            level: 3,
+        };
+        vec![
+            object(1, 2),
+            Planned {
+                key: Key::Instances {
+                    node: 0,
+                    content: 0,
+                    levels: 0,
+                },
+                what: Drawn::Instances(vec![instance].into()),
+                ..object(0, 0)
+            },
+        ]
+    }
+
+    fn levels_of(items: &[Planned]) -> Vec<u8> {
+        items
+            .iter()
+            .flat_map(|p| match (&p.what, p.key) {
+                (Drawn::Instances(i), _) => i.iter().map(|i| i.level).collect(),
+                (_, Key::Object { level, .. }) => vec![level],
+                _ => vec![],
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_model_shares_its_finest_needed_level_or_the_held_one_within_the_slack() {
+        let shared = |held: &[(u64, u8)]| {
+            let mut items = needing_2_and_3();
+            share_levels(&mut items, &held.iter().copied().collect());
+            levels_of(&items)
+        };
+        assert_eq!(shared(&[]), [2, 2], "the finest any object needs");
+        assert_eq!(shared(&[(7, 1)]), [1, 1], "held one level finer: kept");
+        assert_eq!(shared(&[(7, 0)]), [2, 2], "held two levels finer: dropped");
+        assert_eq!(
+            shared(&[(7, 3)]),
+            [2, 2],
+            "held coarser than needed: refined"
+        );
+        assert_eq!(shared(&[(8, 1)]), [2, 2], "another model's level: ignored");
+    }
 
     /// A chain whose error doubles and texels double in size at every level.
     fn chain() -> ModelAsset {
