@@ -537,19 +537,10 @@ async fn viewer(
                     tally.bytes.fetch_add(t.len() as u64, Ordering::Relaxed);
                 }
                 match serde_json::from_str::<ServerMessage>(&t) {
-                    Ok(m @ (ServerMessage::Reset { .. } | ServerMessage::Delta { .. })) => {
-                        let (seq, v, placements) = match &m {
-                            ServerMessage::Reset { seq, view, entries, .. } => {
-                                (*seq, *view, entries.iter().map(|e| e.placements.len()).sum())
-                            }
-                            ServerMessage::Delta { seq, view, add, .. } => {
-                                (*seq, *view, add.iter().map(|a| a.entry.placements.len()).sum::<usize>())
-                            }
-                            ServerMessage::Error { .. } => continue,
-                        };
+                    Ok(ref m @ (ServerMessage::Reset { seq, view: v, .. } | ServerMessage::Delta { seq, view: v, .. })) => {
                         if counting {
                             tally.messages.fetch_add(1, Ordering::Relaxed);
-                            tally.placements.fetch_add(placements as u64, Ordering::Relaxed);
+                            tally.placements.fetch_add(placements_added(m), Ordering::Relaxed);
                         }
                         if v > answered {
                             if let (Some(at), true) = (sent.get(&v), counting) {
@@ -573,6 +564,16 @@ async fn viewer(
         }
     }
     let _ = ws.close(None).await;
+}
+
+/// The placements a reset or delta adds (an error adds none).
+fn placements_added(m: &ServerMessage) -> u64 {
+    let count = |e: &horizon_protocol::Entry| e.placements.len() as u64;
+    match m {
+        ServerMessage::Reset { entries, .. } => entries.iter().map(count).sum(),
+        ServerMessage::Delta { add, .. } => add.iter().map(|a| count(&a.entry)).sum(),
+        ServerMessage::Error { .. } => 0,
+    }
 }
 
 /// Places, moves and deletes objects at `args.mutations` per second until stopped.

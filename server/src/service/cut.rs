@@ -77,7 +77,11 @@ pub fn plan_after(
     let mut planner = Planner::new(served, models, view);
     if let Some(held) = held {
         planner.held_levels = held.held_levels();
-        planner.held_model_levels = held.model_levels();
+        // A held model level may cost more bytes than the levels charged: held only where
+        // no byte budget could be overrun by it.
+        if view.budgets.max_bytes.is_none() {
+            planner.held_model_levels = held.model_levels();
+        }
     }
     planner.seed();
     let stopped_by = planner.refine();
@@ -707,7 +711,8 @@ struct Planner<'a> {
     over_at_seed: bool,
     /// The level of detail each object has in the plan a client holds.
     held_levels: HashMap<u64, u8>,
-    /// The level each model is drawn at in the plan a client holds (`share_levels`).
+    /// The level each model is drawn at in the plan a client holds (`share_levels`); empty
+    /// under a byte budget.
     held_model_levels: HashMap<u64, u8>,
     /// The angle of one pixel, radians.
     pixel_angle: f32,
@@ -1215,6 +1220,16 @@ impl<'a> Planner<'a> {
         node_worst_case(&self.served.tree.bvh, node, self.eye)
     }
 
+    /// `model` if the table has it; otherwise none, counted in `missing` (its objects are
+    /// left out until the table is refreshed).
+    fn known_model(&self, model: u64, missing: &std::cell::Cell<usize>) -> Option<u64> {
+        if self.models.get(model as usize).is_none_or(Option::is_none) {
+            missing.set(missing.get() + 1);
+            return None;
+        }
+        Some(model)
+    }
+
     /// The instances entry of a node: its objects but those `extracted` (pending, their own
     /// entries) or whose model the table lacks (counted in `missing`); none if that leaves
     /// nothing.
@@ -1233,11 +1248,7 @@ impl<'a> Planner<'a> {
             .filter(|o| !extracted.contains(o))
             .filter_map(|o| {
                 let r = tree.bvh.object(o)?;
-                let model = r.model();
-                if self.models.get(model as usize).is_none_or(Option::is_none) {
-                    missing.set(missing.get() + 1);
-                    return None;
-                }
+                let model = self.known_model(r.model(), missing)?;
                 let level = self.level_of(o);
                 Some(Instance {
                     object: tree.world_id(o)?,
@@ -1309,11 +1320,7 @@ impl<'a> Planner<'a> {
             let r = tree.bvh.object(o)?;
             let object = tree.world_id(o)?;
             let sphere = r.sphere();
-            let model = r.model();
-            if self.models.get(model as usize).is_none_or(Option::is_none) {
-                missing.set(missing.get() + 1);
-                return None;
-            };
+            let model = self.known_model(r.model(), &missing)?;
             let level = self.level_of(o);
             Some(Planned {
                 key: Key::Object {
@@ -1401,14 +1408,7 @@ impl<'a> Planner<'a> {
             }
         }
         if self.budgets.max_triangles.is_none() {
-            // A held model level may cost more bytes than the levels charged: kept only
-            // where no byte budget could be overrun by it.
-            let none = HashMap::new();
-            let held = match self.budgets.max_bytes {
-                None => &self.held_model_levels,
-                Some(_) => &none,
-            };
-            share_levels(&mut items, held);
+            share_levels(&mut items, &self.held_model_levels);
         }
         for p in &mut items {
             if let (
