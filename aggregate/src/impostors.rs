@@ -12,7 +12,8 @@
 //!    averaged within a depth threshold: [`Orthoview::composite`]); any other (the leaves of
 //!    the impostor hierarchy) is ray-cast from its objects at full detail
 //!    ([`Orthoview::render`]), a ray per pixel; coverage below full comes from compositing. A child's orthoviews come from this build or, reused, from
-//!    their stored images.
+//!    their stored images; a node one of whose children's images cannot be read is ray-cast
+//!    instead, and named in the report.
 //! 4. **encode**: three lossless PNGs per direction (colour, 16-bit depth, octahedral
 //!    normals), content-addressed through the store, committed level by level; a level's
 //!    orthoviews past [`KEPT_VIEW_BYTES`] are read back from them by the level above.
@@ -40,7 +41,7 @@ use crate::source::ModelSource;
 use crate::store::{AggregateEntry, AggregateStore};
 
 /// Version of the impostor format; part of every impostor key.
-pub const IMPOSTOR_FORMAT: u32 = 5;
+pub const IMPOSTOR_FORMAT: u32 = 6;
 
 /// The solid angle of a client's pixel the orthoviews are made for: 1920 pixels across a
 /// 60-degree field of view, the wire's default `pixel_solid_angle`.
@@ -171,6 +172,9 @@ pub struct ImpostorReport {
     pub bytes_total: u64,
     /// Wall time.
     pub seconds: f64,
+    /// Nodes ray-cast because a child's stored orthoviews could not be read, with why.
+    #[serde(default)]
+    pub unreadable: Vec<(u32, String)>,
 }
 
 /// Builds (or reuses) the impostor of every node that gets one (see the module docs), for
@@ -230,6 +234,7 @@ pub fn build_impostors(
     }
     // Stage 3: make, bottom-up.
     let prepared = PreparedCache::default();
+    let unreadable: Mutex<Vec<(u32, String)>> = Mutex::new(Vec::new());
     let mut below: HashMap<u32, Arc<Vec<Orthoview>>> = HashMap::new();
     for level in crate::build::levels(bvh).iter().rev() {
         if stop() {
@@ -253,8 +258,8 @@ pub fn build_impostors(
                     .unwrap_or_default();
                 let composite =
                     !children.is_empty() && children.iter().all(|c| chosen.contains(&c.0));
-                let views = if composite {
-                    let kids = children
+                let kids = composite.then(|| {
+                    children
                         .iter()
                         .map(|c| match below.get(&c.0) {
                             Some(v) => Ok(v.clone()),
@@ -266,12 +271,25 @@ pub fn build_impostors(
                                 .and_then(|e| e.load(store))
                                 .map(Arc::new),
                         })
-                        .collect::<Result<Vec<_>, _>>()?;
-                    composite_views(&kids, q_of(node.0))
-                } else {
-                    render_views(bvh, node, models, &prepared, q_of(node.0))?
+                        .collect::<Result<Vec<_>, _>>()
+                });
+                // A child whose stored orthoviews cannot be read (damaged, or made by an
+                // older composite) does not stop the build: this node is ray-cast instead.
+                let (views, rendered) = match kids {
+                    Some(Ok(kids)) => (composite_views(&kids, q_of(node.0)), false),
+                    Some(Err(e)) => {
+                        if let Ok(mut u) = unreadable.lock() {
+                            u.push((node.0, e.to_string()));
+                        }
+                        let views = render_views(bvh, node, models, &prepared, q_of(node.0))?;
+                        (views, true)
+                    }
+                    None => (
+                        render_views(bvh, node, models, &prepared, q_of(node.0))?,
+                        true,
+                    ),
                 };
-                Ok((node.0, Arc::new(views), !composite))
+                Ok((node.0, Arc::new(views), rendered))
             })
             .collect::<Result<_, AggregateError>>()?;
         // Stage 4: encode.
@@ -308,6 +326,8 @@ pub fn build_impostors(
         .max()
         .unwrap_or(0);
     report.bytes_total = out.values().map(ImpostorEntry::bytes).sum();
+    report.unreadable = unreadable.into_inner().unwrap_or_default();
+    report.unreadable.sort();
     report.seconds = start.elapsed().as_secs_f64();
     Ok((out, report))
 }

@@ -1,7 +1,7 @@
 //! The offline rebuild on a small world whose right answers are obvious: a grid of boxes
 //! (two byte-different uploads of the same textured box) and spikes.
 
-use std::collections::{BTreeSet, HashMap};
+use std::collections::{BTreeSet, HashMap, HashSet};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 use glam::{Affine3A, Vec2, Vec3, Vec4};
@@ -835,5 +835,87 @@ fn impostors_are_built_bottom_up_inside_their_nodes_and_rebuilt_with_their_aggre
     for (n, e) in &after.impostors {
         e.load(&store)
             .unwrap_or_else(|err| panic!("node {n}: {err}"));
+    }
+}
+
+/// A store whose named blobs read back as damaged bytes, as a disk gone bad would, or images an
+/// older impostor format wrote and this one's validation refuses.
+struct DamagedStore {
+    inner: MemoryStore,
+    damaged: HashSet<String>,
+}
+
+impl AggregateStore for DamagedStore {
+    fn known(&self) -> Result<HashMap<String, AggregateEntry>, AggregateError> {
+        self.inner.known()
+    }
+    fn manifest(&self) -> Result<Option<AggregateManifest>, AggregateError> {
+        self.inner.manifest()
+    }
+    fn stage(
+        &self,
+        key: String,
+        glb: &[u8],
+        parts: Option<(&[u8], PartList)>,
+        stats: NodeStats,
+    ) -> Result<AggregateEntry, AggregateError> {
+        self.inner.stage(key, glb, parts, stats)
+    }
+    fn stage_blob(&self, bytes: &[u8]) -> Result<String, AggregateError> {
+        self.inner.stage_blob(bytes)
+    }
+    fn commit(&self) -> Result<(), AggregateError> {
+        self.inner.commit()
+    }
+    fn parts(&self, hash: &str) -> Result<Vec<u8>, AggregateError> {
+        self.inner.parts(hash)
+    }
+    fn blob(&self, hash: &str) -> Result<Vec<u8>, AggregateError> {
+        if self.damaged.contains(hash) {
+            return Ok(b"not a PNG".to_vec());
+        }
+        AggregateStore::blob(&self.inner, hash)
+    }
+    fn write_manifest(&self, manifest: &AggregateManifest) -> Result<(), AggregateError> {
+        self.inner.write_manifest(manifest)
+    }
+}
+
+/// A reused child's stored orthoviews that cannot be read do not stop a rebuild (the live
+/// rebuild would retry it forever and publish nothing): the parent that needed them is
+/// ray-cast from its objects instead, and the report names it.
+#[test]
+fn a_child_impostor_that_cannot_be_read_makes_its_parent_ray_cast_not_a_failed_build() {
+    let w = world();
+    let mut bvh = tree(&w);
+    let mut store = DamagedStore {
+        inner: MemoryStore::new(),
+        damaged: HashSet::new(),
+    };
+    build_aggregates(&bvh, &w.models, &store, &options(&w), &|_| {}).expect("build");
+    let before = store.manifest().expect("read").expect("manifest");
+    store.damaged = before
+        .impostors
+        .values()
+        .flat_map(|e| e.blobs().cloned())
+        .collect();
+    let t = Affine3A::from_translation(Vec3::new(1.5, 0.0, 1.5));
+    bvh.insert(&new_object(&w, 0, t)).expect("insert");
+    let report = build_aggregates(&bvh, &w.models, &store, &options(&w), &|_| {})
+        .expect("a rebuild over unreadable impostors completes")
+        .report;
+    let imp = report.impostors.expect("an impostor report");
+    assert!(
+        !imp.unreadable.is_empty(),
+        "a rebuilt parent of reused children needed their images"
+    );
+    let after = store.manifest().expect("read").expect("manifest");
+    let old_keys: HashSet<&String> = before.impostors.values().map(|e| &e.key).collect();
+    for (node, why) in &imp.unreadable {
+        assert!(why.contains("PNG") || why.contains("decode"), "{why}");
+        let e = &after.impostors[node];
+        assert!(!old_keys.contains(&e.key), "node {node} was rebuilt");
+        e.load(&store)
+            .unwrap_or_else(|err| panic!("node {node}, ray-cast: {err}"));
     }
 }

@@ -317,7 +317,15 @@ impl Orthoview {
                     if z == 0 {
                         continue;
                     }
+                    // A child's sample may sit up to its own rounding outside its box;
+                    // clamped into this box, this view's samples stay within 0.71 of its
+                    // pixels of it however many levels it was composited up.
                     let p = cf.point(x as f32 + 0.5, y as f32 + 0.5, cf.unquantize(z));
+                    let p = if bounds.is_empty() {
+                        p
+                    } else {
+                        p.clamp(bounds.min, bounds.max)
+                    };
                     let rel = p - f.origin;
                     let (px, py, t) = (
                         rel.dot(f.u) / f.pixel * 2.0,

@@ -156,6 +156,82 @@ fn compositing_two_children_equals_rendering_their_union() {
     }
 }
 
+/// A hierarchy of composites, as a rebuild makes it up a tree: at every level each node's
+/// children are composited into a box holding theirs and a little more, at the same q. Every
+/// level's views keep their samples inside their box (`validate`, which reading a stored
+/// view back runs): the rounding of one level must not carry into the next.
+#[test]
+fn composites_of_composites_keep_their_samples_inside_their_boxes() {
+    let mut rng = horizon_mesh::rng::Rng::new(7);
+    // A flat, wide world, as a city's upper nodes are; leaves of a few boxes each.
+    let mut leaves: Vec<(Aabb, horizon_impostor::Scene)> = Vec::new();
+    for i in 0..16 {
+        let x0 = i as f32 * 40.0;
+        let boxes: Vec<(Vec3, Vec3)> = (0..3)
+            .map(|_| {
+                let min = Vec3::new(
+                    x0 + rng.range(0.0, 30.0),
+                    rng.range(-0.2, 0.0),
+                    rng.range(0.0, 300.0),
+                );
+                (
+                    min,
+                    min + Vec3::new(
+                        rng.range(1.0, 10.0),
+                        rng.range(0.1, 5.0),
+                        rng.range(1.0, 10.0),
+                    ),
+                )
+            })
+            .collect();
+        let bounds = boxes
+            .iter()
+            .fold(Aabb::EMPTY, |b, &(lo, hi)| b.union(&aabb(lo, hi)));
+        let meshes: Vec<InstancedMesh> = boxes.iter().map(|&(lo, hi)| cuboid(lo, hi)).collect();
+        leaves.push((bounds, scene(&meshes)));
+    }
+    let q = 16;
+    for d in canonical_directions() {
+        let mut level: Vec<Orthoview> = leaves
+            .iter()
+            .map(|(b, s)| Orthoview::render(s, b, d, q))
+            .collect();
+        let mut depth = 0;
+        while level.len() > 1 {
+            depth += 1;
+            level = level
+                .chunks(2)
+                .map(|pair| {
+                    let grown = pair.iter().fold(Aabb::EMPTY, |b, v| b.union(&v.bounds));
+                    let parent = aabb(grown.min - Vec3::splat(0.37), grown.max);
+                    let views: Vec<&Orthoview> = pair.iter().collect();
+                    let view = Orthoview::composite(&views, &parent, d, q);
+                    if let Err(e) = view.validate() {
+                        panic!("{d:?}, level {depth}: {e}");
+                    }
+                    // A pixel's sample is its centre at its depth: within half a pixel's
+                    // diagonal of the box, at every level.
+                    let b = view.bounds;
+                    for y in 0..view.height {
+                        for x in 0..view.width {
+                            if let Some(p) = view.point(x, y) {
+                                let off = (p - p.clamp(b.min, b.max)).length();
+                                assert!(
+                                    off <= 0.72 * view.pixel_size(),
+                                    "{d:?}, level {depth}: ({x}, {y}) {off} out, pixel {}",
+                                    view.pixel_size()
+                                );
+                            }
+                        }
+                    }
+                    view
+                })
+                .collect();
+        }
+        assert!(level[0].covered() > 0, "{d:?}");
+    }
+}
+
 #[test]
 fn images_round_trip_losslessly_and_normals_survive_two_bytes() {
     let (min, max) = (Vec3::new(-1.0, 0.0, -2.0), Vec3::new(3.0, 2.0, 1.0));

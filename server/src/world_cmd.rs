@@ -162,6 +162,11 @@ fn print_summary(dir: &Path, s: &BuildSummary) -> std::io::Result<()> {
                 100.0 * i.bytes_total as f64 / a.bytes_total.max(1) as f64,
                 i.seconds,
             )?;
+            for (node, why) in &i.unreadable {
+                outln!(
+                    "impostor of node {node} ray-cast: a child's images could not be read: {why}"
+                )?;
+            }
         }
     }
     Ok(())
