@@ -24,7 +24,7 @@
 //! and the parent decides again at its own budget.
 
 use std::collections::{BTreeMap, HashMap, HashSet};
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 
 use glam::{Affine3A, Vec2, Vec3, Vec4};
 use horizon_impostor::{to_srgb, PreparedMesh, SceneBuilder};
@@ -197,7 +197,7 @@ pub fn apply(mesh: InstancedMesh, input: &ProxyInput<'_>) -> (InstancedMesh, Pro
         }
     }
     let texel = input.display.nearest_length_of_pixels(1.0) as f32;
-    let made: Vec<Option<(Submesh, Texture)>> = models
+    let made: Vec<Option<Proxy>> = models
         .par_iter()
         .map(|&model| {
             let source = match input.sources.get(&model) {
@@ -209,7 +209,8 @@ pub fn apply(mesh: InstancedMesh, input: &ProxyInput<'_>) -> (InstancedMesh, Pro
         .collect();
     let mut proxy_of: HashMap<u64, Option<usize>> = HashMap::new();
     for (model, proxy) in models.into_iter().zip(made) {
-        let submesh = proxy.map(|(mut proxy, texture)| {
+        let submesh = proxy.map(|made| {
+            let (mut proxy, texture) = (*made).clone();
             mesh.textures.push(texture);
             mesh.materials.push(Material {
                 name: Some("proxy".into()),
@@ -312,17 +313,60 @@ fn assess(mesh: &InstancedMesh, input: &ProxyInput<'_>) -> HashMap<u64, Shape> {
         .collect()
 }
 
+/// A model's box proxies, by the sizes of their six tiles (what a proxy depends on besides
+/// the model): the live rebuild remakes the same upper nodes over and over, and each would
+/// ray-cast the same proxies again. Kept with the model ([`SourceModel`]), so the model cache
+/// bounds them, and at most [`PROXY_SIZES_KEPT`] sizes a model.
+#[derive(Debug, Default)]
+pub(crate) struct ProxyMemo(Mutex<HashMap<TileSizes, Option<Proxy>>>);
+
+/// A box proxy made: its submesh and its texture.
+type Proxy = Arc<(Submesh, Texture)>;
+
+/// The sizes of a box proxy's six tiles, in texels ((0, 0) for a face without area).
+type TileSizes = [(u32, u32); 6];
+
+/// The most tile sizes of one model whose proxies are kept: an upper node's proxies are
+/// mostly of the smallest tiles, so a few sizes serve the nodes a live rebuild remakes.
+pub const PROXY_SIZES_KEPT: usize = 8;
+
 /// The model's box in model space, each face textured with what the model shows on that side,
 /// ray-cast orthographically from outside the face (`horizon_impostor`), a texel about
 /// `texel` wide (one pixel at the aggregate's nearest display distance: the atlas resamples
 /// it to its own density), from 2 to [`TILE`] texels along a side; `None` for a model without
-/// area. The six tiles share one PNG, each with a one-texel border repeating its edge.
-fn box_proxy(source: &SourceModel, texel: f32) -> Option<(Submesh, Texture)> {
-    let model = &source.mesh;
-    let bounds = model.bounds();
+/// area. The six tiles share one PNG, each with a one-texel border repeating its edge. Made
+/// once per model and tile sizes ([`ProxyMemo`]).
+fn box_proxy(source: &SourceModel, texel: f32) -> Option<Proxy> {
+    let bounds = source.mesh.bounds();
     if bounds.min.cmpgt(bounds.max).any() {
         return None;
     }
+    let half = (bounds.max - bounds.min) * 0.5;
+    let sizes: TileSizes = FACES.map(|(_, u, v)| {
+        let (lu, lv) = ((u * half).length() * 2.0, (v * half).length() * 2.0);
+        if lu <= 0.0 || lv <= 0.0 {
+            (0, 0)
+        } else {
+            tile_size(lu, lv, texel)
+        }
+    });
+    let memo = &source.proxies.0;
+    if let Some(made) = memo.lock().ok().and_then(|m| m.get(&sizes).cloned()) {
+        return made;
+    }
+    let made = render_box_proxy(source, &sizes).map(Arc::new);
+    if let Ok(mut m) = memo.lock() {
+        if m.len() < PROXY_SIZES_KEPT {
+            m.insert(sizes, made.clone());
+        }
+    }
+    made
+}
+
+/// [`box_proxy`] made: each face's tile ray-cast at its size.
+fn render_box_proxy(source: &SourceModel, sizes: &TileSizes) -> Option<(Submesh, Texture)> {
+    let model = &source.mesh;
+    let bounds = model.bounds();
     let mut scene = SceneBuilder::default();
     scene.add(&Arc::new(PreparedMesh::new(model)), &Affine3A::IDENTITY);
     let scene = scene.build();
@@ -333,10 +377,10 @@ fn box_proxy(source: &SourceModel, texel: f32) -> Option<(Submesh, Texture)> {
     let mut tiles: Vec<(usize, u32, u32, Vec<Vec4>)> = Vec::new();
     for (f, &(n, u, v)) in FACES.iter().enumerate() {
         let (lu, lv) = ((u * half).length() * 2.0, (v * half).length() * 2.0);
-        if lu <= 0.0 || lv <= 0.0 {
+        let (w, h) = sizes[f];
+        if lu <= 0.0 || lv <= 0.0 || w == 0 || h == 0 {
             continue;
         }
-        let (w, h) = tile_size(lu, lv, texel);
         let texel = (lu / w as f32).max(lv / h as f32);
         let face = centre + n * (n.abs().dot(half) + margin);
         let mut texels: Vec<Option<Vec4>> = Vec::with_capacity((w * h) as usize);
@@ -509,7 +553,8 @@ mod tests {
             transform: Affine3A::IDENTITY,
         });
         let source = SourceModel::new("block".into(), mesh, Vec::new(), Vec::new());
-        let (b, texture) = box_proxy(&source, 0.1).expect("a proxy");
+        let made = box_proxy(&source, 0.1).expect("a proxy");
+        let (b, texture) = &*made;
         assert_eq!(b.triangle_count(), PROXY_TRIANGLES);
         let centre = Vec3::new(1.0, 1.6, 0.5);
         let normals = b.normals.as_ref().expect("normals");
@@ -538,6 +583,41 @@ mod tests {
         assert!(side[0] > 200 && side[2] < 50, "{side:?}");
         let rim = at(0, 0.99, 0.5);
         assert!(rim[2] > 200, "{rim:?}");
+    }
+
+    /// A model's proxy at given tile sizes is made once and then taken from its memo, equal
+    /// to one made afresh; other sizes are other proxies, up to the memo's bound.
+    #[test]
+    fn a_proxy_is_made_once_per_model_and_tile_sizes() {
+        let red = Vec4::new(1.0, 0.0, 0.0, 1.0);
+        let source = SourceModel::new(
+            "block".into(),
+            solid(Vec3::ZERO, Vec3::new(2.0, 3.0, 1.0), red),
+            Vec::new(),
+            Vec::new(),
+        );
+        let first = box_proxy(&source, 0.1).expect("a proxy");
+        // A texel a little wider gives the same tile sizes: the same proxy, not made again.
+        let again = box_proxy(&source, 0.1001).expect("a proxy");
+        assert!(Arc::ptr_eq(&first, &again));
+        let sizes: TileSizes = [(30, 10); 6];
+        let fresh = {
+            let memo = source.proxies.0.lock().expect("memo");
+            assert_eq!(memo.len(), 1);
+            let kept = memo.keys().next().copied().expect("one size");
+            assert_ne!(kept, sizes);
+            render_box_proxy(&source, &kept).expect("a proxy")
+        };
+        assert_eq!(first.0, fresh.0);
+        assert_eq!(first.1.bytes, fresh.1.bytes);
+        // Coarser texels, other sizes: other proxies, kept up to the bound.
+        let coarse = box_proxy(&source, 0.5).expect("a proxy");
+        assert!(!Arc::ptr_eq(&first, &coarse));
+        for k in 0..2 * PROXY_SIZES_KEPT {
+            box_proxy(&source, 0.02 + 0.01 * k as f32).expect("a proxy");
+        }
+        let kept = source.proxies.0.lock().expect("memo").len();
+        assert_eq!(kept, PROXY_SIZES_KEPT);
     }
 
     #[test]

@@ -25,6 +25,8 @@ pub struct SourceModel {
     pub placements: Vec<Vec<Affine3A>>,
     /// For each submesh, a bounding sphere (centre, radius) in its own space.
     pub part_spheres: Vec<(Vec3, f32)>,
+    /// Its box proxies made so far (`proxy.rs`), by the sizes of their six tiles.
+    pub(crate) proxies: crate::proxy::ProxyMemo,
 }
 
 impl SourceModel {
@@ -60,6 +62,7 @@ impl SourceModel {
             frame,
             placements,
             part_spheres,
+            proxies: crate::proxy::ProxyMemo::default(),
         }
     }
 
