@@ -3,7 +3,9 @@
 //! run:
 //! 1. **uploads**: the models of a world uploaded into an empty one with 1 and with 8
 //!    concurrent clients (models/s, MB/s), against the same ingest done offline in this
-//!    process (import, validate, normalise, hash, describe) on one thread and on every core;
+//!    process on one thread and on every core: import, validate, normalise, hash, describe
+//!    (the issue's peer), and the same with the levels of detail the upload also builds (the
+//!    like-for-like peer);
 //! 2. **freshness**: placements issued at 1 per second over a built world, each timed from its
 //!    2xx to the first published generation that includes it (p50, p99); then 20 mutations/s
 //!    for 60 s, with the dirty set and the generation lag sampled every 100 ms (maxima);
@@ -25,7 +27,7 @@ use anyhow::Context;
 use hdrhistogram::Histogram;
 use horizon_mesh::rng::Rng;
 use horizon_server::outln;
-use horizon_world::ingest::{describe_stored, import_upload, normalise};
+use horizon_world::ingest::{describe_read, import_upload, level_read, normalise, read_stored};
 use horizon_world::{content_hash, UploadLimits, World};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -54,6 +56,8 @@ pub struct Args {
     pub out: Option<PathBuf>,
     /// Seed of positions and choices.
     pub seed: u64,
+    /// Where the served world's log goes (the rebuild's stage times); none: discarded.
+    pub server_log: Option<PathBuf>,
 }
 
 #[derive(Debug, Serialize)]
@@ -62,6 +66,9 @@ struct Report {
     uploads: Vec<UploadRun>,
     offline_one_thread_ms_per_model: f64,
     offline_all_threads_ms_per_model: f64,
+    /// The same with levels of detail, as the upload makes them.
+    offline_levels_one_thread_ms_per_model: f64,
+    offline_levels_all_threads_ms_per_model: f64,
     freshness_ms: Percentiles,
     freshness_samples: usize,
     sustained: Sustained,
@@ -80,6 +87,8 @@ struct UploadRun {
     ms_per_model: f64,
     /// `ms_per_model` over the offline time per model with as many threads.
     ratio_to_offline: f64,
+    /// Over the offline time with levels of detail.
+    ratio_to_offline_with_levels: f64,
 }
 
 #[derive(Debug, Default, Serialize)]
@@ -97,6 +106,8 @@ struct Sustained {
     max_dirty_nodes: u64,
     max_generation_lag: u64,
     final_lag: u64,
+    /// Seconds from the end of the mutations to the last generation published.
+    catch_up_seconds: f64,
 }
 
 #[derive(Debug, Serialize)]
@@ -132,21 +143,24 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         "horizon-lab: bench-service: offline ingest of {} models",
         models.len()
     );
-    let offline_one = time_offline(&models, 1)?;
-    let offline_all = time_offline(&models, rayon::current_num_threads())?;
+    let all = rayon::current_num_threads();
+    let offline_one = time_offline(&models, 1, false)?;
+    let offline_all = time_offline(&models, all, false)?;
+    let levels_one = time_offline(&models, 1, true)?;
+    let levels_all = time_offline(&models, all, true)?;
     let mut uploads = Vec::new();
     for clients in [1, 8] {
         let scratch = tempdir("upload")?;
-        let server = Server::start(&args.horizon, &scratch)?;
+        let server = Server::start(&args.horizon, &scratch, None)?;
         let token = server.token(&scratch, "bench")?;
         eprintln!("horizon-lab: bench-service: uploading with {clients} clients");
         let (seconds, bytes) =
             runtime.block_on(upload_all(&server.url, &token, &models, clients))?;
         let per_model = seconds * 1e3 / models.len() as f64;
-        let offline = if clients == 1 {
-            offline_one
+        let (offline, levels) = if clients == 1 {
+            (offline_one, levels_one)
         } else {
-            offline_all
+            (offline_all, levels_all)
         };
         uploads.push(UploadRun {
             clients,
@@ -157,6 +171,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             megabytes_per_second: bytes as f64 / 1e6 / seconds,
             ms_per_model: per_model,
             ratio_to_offline: per_model / offline,
+            ratio_to_offline_with_levels: per_model / levels,
         });
         drop(server);
         let _ = std::fs::remove_dir_all(&scratch);
@@ -165,7 +180,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     // 2. Freshness and sustained load on a copy of the built world.
     let served = tempdir("served")?;
     copy_dir(&args.world, &served)?;
-    let server = Server::start(&args.horizon, &served)?;
+    let server = Server::start(&args.horizon, &served, args.server_log.as_deref())?;
     let token = server.token(&served, "bench")?;
     eprintln!(
         "horizon-lab: bench-service: {} placements at 1/s",
@@ -185,7 +200,10 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         args.seed,
     ))?;
 
-    // 3. Asset load, on the aggregates published now (the mutations replaced some).
+    // 3. Asset load, once the rebuild has caught up (every aggregate fetched stays named by a
+    // published manifest: a load on a world still publishing asks for collected ones), on the
+    // aggregates published then.
+    let catch_up = runtime.block_on(settle(&server.url))?;
     let mut assets = Vec::new();
     let hashes = runtime.block_on(published_aggregates(&served, &server.url))?;
     for target in ["assets", "world"] {
@@ -216,6 +234,10 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         });
     }
     let server_rss_bytes = server.peak_rss();
+    let sustained = Sustained {
+        catch_up_seconds: catch_up,
+        ..sustained
+    };
     drop(server);
     let _ = std::fs::remove_dir_all(&served);
 
@@ -224,6 +246,8 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         uploads,
         offline_one_thread_ms_per_model: offline_one,
         offline_all_threads_ms_per_model: offline_all,
+        offline_levels_one_thread_ms_per_model: levels_one,
+        offline_levels_all_threads_ms_per_model: levels_all,
         freshness_ms: freshness,
         freshness_samples: samples,
         sustained,
@@ -245,8 +269,9 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
 }
 
 /// Milliseconds per model of the offline ingest on `threads` threads: import under the upload
-/// limits, validate, normalise, hash, describe.
-fn time_offline(models: &[(String, Vec<u8>)], threads: usize) -> anyhow::Result<f64> {
+/// limits, validate, normalise, hash, describe, and with `levels` the levels of detail (beside
+/// the descriptors, as the upload builds them).
+fn time_offline(models: &[(String, Vec<u8>)], threads: usize, levels: bool) -> anyhow::Result<f64> {
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
         .build()?;
@@ -257,7 +282,17 @@ fn time_offline(models: &[(String, Vec<u8>)], threads: usize) -> anyhow::Result<
             let ingested = import_upload(bytes, &limits)?;
             let glb = normalise(name, &ingested.mesh)?;
             std::hint::black_box(content_hash(&glb));
-            describe_stored(name, &glb)?;
+            let stored = read_stored(name, &glb)?;
+            if levels {
+                let (described, chain) = rayon::join(
+                    || describe_read(name, &stored),
+                    || level_read(&stored, glb.len() as u64),
+                );
+                described?;
+                std::hint::black_box(chain);
+            } else {
+                describe_read(name, &stored)?;
+            }
             Ok::<(), horizon_world::WorldError>(())
         })
     })?;
@@ -370,6 +405,28 @@ async fn freshness(
     Ok((percentiles(&histogram), count))
 }
 
+/// Waits until the last generation is published; returns the seconds that took.
+async fn settle(url: &str) -> anyhow::Result<f64> {
+    let client = reqwest::Client::new();
+    let started = Instant::now();
+    loop {
+        let w: Value = client
+            .get(format!("{url}/v1/world"))
+            .send()
+            .await?
+            .json()
+            .await?;
+        if w["published"].as_u64() >= w["generation"].as_u64() {
+            return Ok(started.elapsed().as_secs_f64());
+        }
+        anyhow::ensure!(
+            started.elapsed() < Duration::from_secs(600),
+            "the rebuild did not catch up within 10 minutes"
+        );
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+}
+
 /// `rate` mutations per second for `seconds` (placements, and moves of what was placed),
 /// sampling the dirty set and the generation lag every 100 ms.
 async fn sustain(
@@ -457,6 +514,7 @@ async fn sustain(
         max_dirty_nodes,
         max_generation_lag,
         final_lag,
+        catch_up_seconds: 0.0,
     })
 }
 
@@ -596,13 +654,21 @@ struct Server {
 }
 
 impl Server {
-    fn start(horizon: &Path, dir: &Path) -> anyhow::Result<Self> {
+    fn start(horizon: &Path, dir: &Path, log: Option<&Path>) -> anyhow::Result<Self> {
+        let stderr = match log {
+            Some(path) => Stdio::from(
+                std::fs::File::create(path)
+                    .with_context(|| format!("cannot write {}", path.display()))?,
+            ),
+            None => Stdio::null(),
+        };
         let mut child = Command::new(horizon)
             .args(["serve"])
             .arg(dir)
             .args(["--listen", "127.0.0.1:0"])
+            .env("RUST_LOG", "info")
             .stdout(Stdio::piped())
-            .stderr(Stdio::null())
+            .stderr(stderr)
             .spawn()
             .with_context(|| format!("cannot start {}", horizon.display()))?;
         let mut line = String::new();
@@ -677,18 +743,22 @@ fn markdown(r: &Report, args: &Args) -> String {
     let _ = writeln!(
         s,
         "Offline ingest in this process (import, validate, normalise, hash, describe): \
-         {:.1} ms per model on one thread, {:.1} ms on every core.\n",
-        r.offline_one_thread_ms_per_model, r.offline_all_threads_ms_per_model
+         {:.1} ms per model on one thread, {:.1} ms on every core. With the levels of detail \
+         the upload also builds (beside the descriptors): {:.1} ms and {:.1} ms.\n",
+        r.offline_one_thread_ms_per_model,
+        r.offline_all_threads_ms_per_model,
+        r.offline_levels_one_thread_ms_per_model,
+        r.offline_levels_all_threads_ms_per_model
     );
     let _ = writeln!(
         s,
-        "| clients | models | MB | seconds | models/s | MB/s | ms per model | vs offline | target <= 1.25 |"
+        "| clients | models | MB | seconds | models/s | MB/s | ms per model | vs offline | target <= 1.25 | vs offline with levels |"
     );
-    let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|");
+    let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|---|");
     for u in &r.uploads {
         let _ = writeln!(
             s,
-            "| {} | {} | {:.1} | {:.2} | {:.1} | {:.2} | {:.1} | {:.2}x | {} |",
+            "| {} | {} | {:.1} | {:.2} | {:.1} | {:.2} | {:.1} | {:.2}x | {} | {:.2}x |",
             u.clients,
             u.models,
             u.bytes as f64 / 1e6,
@@ -701,7 +771,8 @@ fn markdown(r: &Report, args: &Args) -> String {
                 "PASS"
             } else {
                 "FAIL"
-            }
+            },
+            u.ratio_to_offline_with_levels
         );
     }
     let _ = writeln!(s, "\n## Freshness\n");
@@ -718,13 +789,15 @@ fn markdown(r: &Report, args: &Args) -> String {
     let _ = writeln!(
         s,
         "Sustained: {} mutations at {}/s for {} s; the dirty set peaked at {} nodes and the \
-         generation lag at {} (it was {} at the end).\n",
+         generation lag at {} (it was {} at the end, and every generation was published \
+         {:.1} s later).\n",
         r.sustained.mutations,
         r.sustained.rate,
         r.sustained.seconds,
         r.sustained.max_dirty_nodes,
         r.sustained.max_generation_lag,
-        r.sustained.final_lag
+        r.sustained.final_lag,
+        r.sustained.catch_up_seconds
     );
     let _ = writeln!(s, "## Assets\n");
     let _ = writeln!(

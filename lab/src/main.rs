@@ -186,6 +186,9 @@ enum Command {
         /// Seed of positions and choices.
         #[arg(long, default_value_t = 1)]
         seed: u64,
+        /// Where the served world's log goes (its rebuilds' stage times).
+        #[arg(long)]
+        server_log: Option<PathBuf>,
     },
     /// The query API under load: simulated viewers walk seeded paths holding standing queries
     /// on `/v1/stream` while a client mutates the world; camera-update-to-delta latency,
@@ -413,6 +416,7 @@ fn main() -> ExitCode {
             load_seconds,
             out,
             seed,
+            server_log,
         } => horizon_binary(horizon).and_then(|horizon| {
             bench_service::run(&bench_service::Args {
                 world,
@@ -425,6 +429,7 @@ fn main() -> ExitCode {
                 load_seconds,
                 out,
                 seed,
+                server_log,
             })
         }),
         Command::Calibrate {

@@ -105,6 +105,9 @@ fn work(world: &World, config: &Config, stop: &AtomicBool) {
         match world.rebuild_aggregates_until(config.aggregates, &|_| {}, &stopped) {
             Ok(report) => {
                 let seconds = started.elapsed().as_secs_f64();
+                for (node, why) in report.build.impostors.iter().flat_map(|i| &i.unreadable) {
+                    tracing::warn!(node, error = %why, "impostor ray-cast: a child's images could not be read");
+                }
                 metrics::histogram!("horizon_rebuild_seconds").record(seconds);
                 metrics::counter!("horizon_aggregates_built_total")
                     .increment(report.build.built as u64);
@@ -116,6 +119,14 @@ fn work(world: &World, config: &Config, stop: &AtomicBool) {
                     failed = report.build.failed.len(),
                     seconds,
                     build_seconds = report.build.seconds,
+                    impostor_seconds = report.build.impostors.as_ref().map_or(0.0, |i| i.seconds),
+                    level_seconds = ?report
+                        .build
+                        .level_times
+                        .iter()
+                        .filter(|l| l.built > 0)
+                        .map(|l| (l.depth, l.built, (l.seconds * 1e3).round() / 1e3))
+                        .collect::<Vec<_>>(),
                     stages = ?report.build.stages,
                     "published"
                 );
