@@ -316,7 +316,7 @@ fn assess(mesh: &InstancedMesh, input: &ProxyInput<'_>) -> HashMap<u64, Shape> {
 /// A model's box proxies, by the sizes of their six tiles (what a proxy depends on besides
 /// the model): the live rebuild remakes the same upper nodes over and over, and each would
 /// ray-cast the same proxies again. Kept with the model ([`SourceModel`]), so the model cache
-/// bounds them, and at most [`PROXY_SIZES_KEPT`] sizes a model.
+/// bounds them, at most [`PROXY_SIZES_KEPT`] sizes and [`PROXY_BYTES_KEPT`] a model.
 #[derive(Debug, Default)]
 pub(crate) struct ProxyMemo(Mutex<HashMap<TileSizes, Option<Proxy>>>);
 
@@ -329,6 +329,11 @@ type TileSizes = [(u32, u32); 6];
 /// The most tile sizes of one model whose proxies are kept: an upper node's proxies are
 /// mostly of the smallest tiles, so a few sizes serve the nodes a live rebuild remakes.
 pub const PROXY_SIZES_KEPT: usize = 8;
+
+/// The most texture bytes of one model's kept proxies: small tiles (an upper node's, a few
+/// hundred bytes each) are kept, large ones are made again. The model cache does not count
+/// them, so this bounds what they add to it (at most 32 KB a cached model).
+pub const PROXY_BYTES_KEPT: usize = 32 << 10;
 
 /// The model's box in model space, each face textured with what the model shows on that side,
 /// ray-cast orthographically from outside the face (`horizon_impostor`), a texel about
@@ -356,7 +361,9 @@ fn box_proxy(source: &SourceModel, texel: f32) -> Option<Proxy> {
     }
     let made = render_box_proxy(source, &sizes).map(Arc::new);
     if let Ok(mut m) = memo.lock() {
-        if m.len() < PROXY_SIZES_KEPT {
+        let bytes = |p: &Option<Proxy>| p.as_ref().map_or(0, |p| p.1.bytes.len());
+        let kept: usize = m.values().map(bytes).sum();
+        if m.len() < PROXY_SIZES_KEPT && kept + bytes(&made) <= PROXY_BYTES_KEPT {
             m.insert(sizes, made.clone());
         }
     }
@@ -496,6 +503,34 @@ fn fill_misses(texels: Vec<Option<Vec4>>) -> Vec<Vec4> {
 mod tests {
     use super::*;
 
+    /// A block of `size` made of 2 m cubes of scattered colours, each its own material: its
+    /// proxies' tiles compress badly.
+    fn checkered(size: Vec3) -> InstancedMesh {
+        let n = (size / 2.0).ceil().as_uvec3();
+        let mut out = InstancedMesh::default();
+        let mut k = 0u32;
+        for x in 0..n.x {
+            for y in 0..n.y {
+                for z in 0..n.z {
+                    let lo = Vec3::new(x as f32, y as f32, z as f32) * 2.0;
+                    k = k.wrapping_mul(2_654_435_761).wrapping_add(12_345);
+                    let c = |shift: u32| ((k >> shift) & 255) as f32 / 255.0;
+                    let cube = solid(lo, lo + 2.0, Vec4::new(c(0), c(8), c(16), 1.0));
+                    out.materials.push(cube.materials[0].clone());
+                    out.submeshes.push(Submesh {
+                        material: Some(out.materials.len() - 1),
+                        ..cube.submeshes[0].clone()
+                    });
+                    out.instances.push(Instance {
+                        submesh: out.submeshes.len() - 1,
+                        transform: Affine3A::IDENTITY,
+                    });
+                }
+            }
+        }
+        out
+    }
+
     /// A closed box from `lo` to `hi`, counter-clockwise outside, in one untextured material
     /// of `color` (linear).
     fn solid(lo: Vec3, hi: Vec3, color: Vec4) -> InstancedMesh {
@@ -618,6 +653,20 @@ mod tests {
         }
         let kept = source.proxies.0.lock().expect("memo").len();
         assert_eq!(kept, PROXY_SIZES_KEPT);
+        // A model whose proxies are large keeps fewer of them.
+        let noisy = SourceModel::new(
+            "noisy".into(),
+            checkered(Vec3::new(40.0, 30.0, 20.0)),
+            Vec::new(),
+            Vec::new(),
+        );
+        for k in 0..PROXY_SIZES_KEPT {
+            box_proxy(&noisy, 0.3 + 0.05 * k as f32).expect("a proxy");
+        }
+        let memo = noisy.proxies.0.lock().expect("memo");
+        let bytes: usize = memo.values().flatten().map(|p| p.1.bytes.len()).sum();
+        assert!(bytes <= PROXY_BYTES_KEPT, "{bytes}");
+        assert!(memo.len() < PROXY_SIZES_KEPT, "{} sizes kept", memo.len());
     }
 
     #[test]
