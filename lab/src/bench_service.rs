@@ -6,8 +6,9 @@
 //!    process on one thread and on every core: import, validate, normalise, hash, describe
 //!    (the issue's peer), and the same with the levels of detail the upload also builds (the
 //!    like-for-like peer);
-//! 2. **freshness**: placements issued at 1 per second over a built world, each timed from its
-//!    2xx to the first published generation that includes it (p50, p99); then 20 mutations/s
+//! 2. **freshness**: placements issued at 1 per second over a built world (on the clock, not
+//!    after the one before is published), each timed from its 2xx to the first published
+//!    generation that includes it (p50, p99); then 20 mutations/s
 //!    for 60 s, with the dirty set and the generation lag sampled every 100 ms (maxima);
 //! 3. **assets**: an open-loop load at a fixed rate against `GET /assets/{hash}` (aggregates
 //!    of the published build) and `GET /v1/world`, latencies measured from each request's
@@ -349,8 +350,10 @@ async fn upload_all(
     Ok((started.elapsed().as_secs_f64(), bytes))
 }
 
-/// Places `count` objects at 1 per second at seeded places over the world's bounds, each
-/// timed from its 2xx to the first published generation at or past its own.
+/// Places `count` objects at 1 per second at seeded places over the world's bounds (issued on
+/// the clock, whatever the rebuild is doing: `DESIGN.md`'s definition), each timed from its
+/// 2xx to the first published generation at or past its own, watched by one poller of
+/// `/v1/world` every 10 ms.
 async fn freshness(
     url: &str,
     token: &str,
@@ -366,8 +369,24 @@ async fn freshness(
         .await?;
     let (lo, hi) = bounds(&world)?;
     let models = model_ids(&client, url).await?;
+    let (tell, published) = tokio::sync::watch::channel(0u64);
+    let poller = {
+        let (client, url) = (client.clone(), url.to_owned());
+        tokio::spawn(async move {
+            loop {
+                let w = match client.get(format!("{url}/v1/world")).send().await {
+                    Ok(r) => r.json::<Value>().await.ok(),
+                    Err(_) => None,
+                };
+                if let Some(p) = w.and_then(|w| w["published"].as_u64()) {
+                    tell.send_if_modified(|v| std::mem::replace(v, p) != p);
+                }
+                tokio::time::sleep(Duration::from_millis(10)).await;
+            }
+        })
+    };
     let mut rng = Rng::new(seed);
-    let mut histogram = Histogram::<u64>::new(3)?;
+    let mut timed = Vec::with_capacity(count);
     let mut next = Instant::now();
     for _ in 0..count {
         tokio::time::sleep_until(next.into()).await;
@@ -384,24 +403,25 @@ async fn freshness(
             .await?;
         let acknowledged = Instant::now();
         let generation = created["generation"].as_u64().context("no generation")?;
-        loop {
-            let w: Value = client
-                .get(format!("{url}/v1/world"))
-                .send()
-                .await?
-                .json()
-                .await?;
-            if w["published"].as_u64().unwrap_or(0) >= generation {
-                break;
-            }
+        let mut published = published.clone();
+        timed.push(tokio::spawn(async move {
+            let seen = tokio::time::timeout(
+                Duration::from_secs(600),
+                published.wait_for(|&p| p >= generation),
+            )
+            .await;
             anyhow::ensure!(
-                acknowledged.elapsed() < Duration::from_secs(600),
+                matches!(seen, Ok(Ok(_))),
                 "generation {generation} was not published within 10 minutes"
             );
-            tokio::time::sleep(Duration::from_millis(10)).await;
-        }
-        histogram.record(acknowledged.elapsed().as_micros() as u64)?;
+            Ok(acknowledged.elapsed())
+        }));
     }
+    let mut histogram = Histogram::<u64>::new(3)?;
+    for t in timed {
+        histogram.record(t.await??.as_micros() as u64)?;
+    }
+    poller.abort();
     Ok((percentiles(&histogram), count))
 }
 
@@ -778,8 +798,8 @@ fn markdown(r: &Report, args: &Args) -> String {
     let _ = writeln!(s, "\n## Freshness\n");
     let _ = writeln!(
         s,
-        "{} placements at 1 per second, each from its 2xx to the first published generation \
-         that includes it: p50 {:.0} ms, p99 {:.0} ms, max {:.0} ms (target p99 <= 2,000 ms: {}).\n",
+        "{} placements issued at 1 per second (on the clock, whatever the rebuild is doing), \
+         each from its 2xx to the first published generation that includes it: p50 {:.0} ms, p99 {:.0} ms, max {:.0} ms (target p99 <= 2,000 ms: {}).\n",
         r.freshness_samples,
         r.freshness_ms.p50,
         r.freshness_ms.p99,

@@ -1198,40 +1198,56 @@ impl World {
         published: &Published,
         dropped: Option<&str>,
     ) -> Result<usize, WorldError> {
-        let mut keep = named_blobs(current);
-        let mut keys: Vec<String> = current.nodes.values().map(|e| e.key.clone()).collect();
-        if let Some(previous) = self.read_manifest(published.previous_manifest.as_deref())? {
-            keep.extend(named_blobs(&previous));
-            keys.extend(previous.nodes.values().map(|e| e.key.clone()));
+        // What the two published manifests name, borrowed from them: a build changes a few
+        // nodes of thousands, so the names are many and the blobs to delete few.
+        let previous = self.read_manifest(published.previous_manifest.as_deref())?;
+        let manifests = std::iter::once(current).chain(previous.as_deref());
+        let mut keep: HashSet<&str> = HashSet::new();
+        let mut kept: HashSet<&str> = HashSet::new();
+        for m in manifests {
+            keep.extend(m.blobs().map(String::as_str));
+            kept.extend(m.nodes.values().map(|e| e.key.as_str()));
         }
-        let mut removed = 0;
-        let kept: HashSet<&String> = keys.iter().collect();
         let mut entries = self.lock_entries()?;
-        let recorded = match entries.as_ref() {
-            Some(map) => map.values().cloned().collect(),
-            None => recorded_entries(self.meta.as_ref())?,
+        let stale: Vec<horizon_aggregate::AggregateEntry> = match entries.as_ref() {
+            Some(map) => map
+                .values()
+                .filter(|e| !kept.contains(e.key.as_str()))
+                .cloned()
+                .collect(),
+            None => recorded_entries(self.meta.as_ref())?
+                .into_iter()
+                .filter(|e| !kept.contains(e.key.as_str()))
+                .collect(),
         };
-        for entry in recorded.iter().filter(|e| !kept.contains(&e.key)) {
+        let mut deleted: HashSet<String> = HashSet::new();
+        let mut delete = |hash: &String| -> Result<(), WorldError> {
+            if !keep.contains(hash.as_str()) && deleted.insert(hash.clone()) {
+                self.blobs.delete(hash)?;
+            }
+            Ok(())
+        };
+        for entry in &stale {
             for hash in std::iter::once(&entry.glb).chain(entry.parts.as_ref()) {
-                if !keep.contains(hash) {
-                    self.blobs.delete(hash)?;
-                    keep.insert(hash.clone());
-                    removed += 1;
-                }
+                delete(hash)?;
             }
         }
         if let Some(old) = self.read_manifest(dropped).ok().flatten() {
             for hash in old.impostors.values().flat_map(|e| e.blobs()) {
-                if !keep.contains(hash) {
-                    self.blobs.delete(hash)?;
-                    keep.insert(hash.clone());
-                    removed += 1;
-                }
+                delete(hash)?;
             }
         }
-        self.meta.retain_aggregate_entries(&keys)?;
-        if let Some(map) = entries.as_mut() {
-            map.retain(|k, _| kept.contains(k));
+        match entries.as_mut() {
+            // The map holds every recorded entry whose blobs are stored: the stale ones go.
+            Some(map) => {
+                let stale_keys: Vec<String> = stale.into_iter().map(|e| e.key).collect();
+                self.meta.remove_aggregate_entries(&stale_keys)?;
+                map.retain(|k, _| kept.contains(k.as_str()));
+            }
+            None => {
+                let keys: Vec<String> = kept.iter().map(|k| (*k).to_owned()).collect();
+                self.meta.retain_aggregate_entries(&keys)?;
+            }
         }
         // Only the two published manifests are read again.
         let names: HashSet<&String> = [&published.manifest, &published.previous_manifest]
@@ -1239,7 +1255,7 @@ impl World {
             .flatten()
             .collect();
         self.lock_manifests()?.retain(|k, _| names.contains(k));
-        Ok(removed)
+        Ok(deleted.len())
     }
 
     /// Deletes every blob nothing refers to: not a model, not named by a recorded aggregate

@@ -225,6 +225,8 @@ pub trait MetaStore: Send + Sync + std::fmt::Debug {
     fn put_aggregate_entries(&self, entries: &[(String, String)]) -> Result<(), WorldError>;
     /// Keeps only the entries whose keys are listed.
     fn retain_aggregate_entries(&self, keys: &[String]) -> Result<(), WorldError>;
+    /// Removes the entries with these keys, in one transaction.
+    fn remove_aggregate_entries(&self, keys: &[String]) -> Result<(), WorldError>;
 
     /// What is published.
     fn published(&self) -> Result<Published, WorldError>;

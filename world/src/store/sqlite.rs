@@ -551,6 +551,23 @@ impl MetaStore for SqliteMeta {
         tx.commit().map_err(sql)
     }
 
+    fn remove_aggregate_entries(&self, keys: &[String]) -> Result<(), WorldError> {
+        if keys.is_empty() {
+            return Ok(());
+        }
+        let mut db = self.lock()?;
+        let tx = db.transaction().map_err(sql)?;
+        {
+            let mut stmt = tx
+                .prepare("DELETE FROM aggregates WHERE key = ?1")
+                .map_err(sql)?;
+            for key in keys {
+                stmt.execute([key]).map_err(sql)?;
+            }
+        }
+        tx.commit().map_err(sql)
+    }
+
     fn published(&self) -> Result<Published, WorldError> {
         let db = self.lock()?;
         match get_key(&db, "published")? {
