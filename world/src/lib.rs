@@ -42,4 +42,6 @@ pub use store::{
     Published, SqliteMeta, User,
 };
 pub use tree::{new_object, sphere_of, Describe, Tree};
-pub use world::{Change, RebuildReport, Served, World, WorldStatus, SNAPSHOT_EVERY};
+pub use world::{
+    Change, RebuildOverhead, RebuildReport, Served, World, WorldStatus, SNAPSHOT_EVERY,
+};

@@ -172,6 +172,21 @@ pub struct RebuildReport {
     pub generation: u64,
     /// Blobs of earlier builds that no published manifest names any more, deleted.
     pub removed_blobs: usize,
+    /// Wall seconds outside the build itself: before it (the tree, the stored entries and
+    /// the previous manifest), publishing (the manifest written, the generation recorded) and
+    /// collecting what is no longer named.
+    pub overhead: RebuildOverhead,
+}
+
+/// Where a rebuild's wall time goes outside [`BuildReport::seconds`].
+#[derive(Clone, Copy, Debug, Default, Serialize)]
+pub struct RebuildOverhead {
+    /// From the call to the build's start.
+    pub prepare_seconds: f64,
+    /// From the build's end to the generation's publication.
+    pub publish_seconds: f64,
+    /// Garbage collection (and a tree snapshot when one is due), after publication.
+    pub collect_seconds: f64,
 }
 
 /// One change a user asks for.
@@ -1019,12 +1034,17 @@ impl World {
 
     /// Stores `tree` as the snapshot, which lets the log before it go.
     fn save_snapshot(&self, tree: &Tree) -> Result<(), WorldError> {
+        let before = self.meta.snapshot()?;
         let blob = self.blobs.put(&tree.to_snapshot()?)?;
         self.meta.put_snapshot(&Snapshot {
             generation: tree.generation,
-            blob,
+            blob: blob.clone(),
         })?;
         self.lock_status()?.snapshot = tree.generation;
+        // The snapshot it replaces names nothing now: the log before the new one is gone.
+        if let Some(old) = before.filter(|old| old.blob != blob) {
+            self.blobs.delete(&old.blob)?;
+        }
         Ok(())
     }
 
@@ -1138,8 +1158,10 @@ impl World {
                 .lock()
                 .map_or(ImpostorPolicy::WherePaying, |p| *p),
         };
+        let prepare_seconds = started.elapsed().as_secs_f64();
         let outcome =
             build_aggregates_until(&tree.bvh, &self.models, &sink, &build, progress, stop);
+        let built_at = Instant::now();
         // What the build committed is reusable whether or not it finished.
         if let Some(entries) = self.lock_entries()?.as_mut() {
             entries.extend(sink.committed().into_iter().map(|e| (e.key.clone(), e)));
@@ -1176,6 +1198,8 @@ impl World {
         }
         self.changed.notify_all();
         self.tell_listeners();
+        let publish_seconds = built_at.elapsed().as_secs_f64();
+        let published_at = Instant::now();
         let removed_blobs =
             self.collect_garbage(&outcome.manifest, &published, dropped.as_deref())?;
         if generation.saturating_sub(self.lock_status()?.snapshot) >= SNAPSHOT_EVERY {
@@ -1185,13 +1209,19 @@ impl World {
             build: outcome.report,
             generation,
             removed_blobs,
+            overhead: RebuildOverhead {
+                prepare_seconds,
+                publish_seconds,
+                collect_seconds: published_at.elapsed().as_secs_f64(),
+            },
         })
     }
 
     /// Deletes the aggregate blobs and entries that neither the published manifest nor the
     /// one before it names (clients may still fetch what the one before named), and the
-    /// orthoview images of `dropped` (the manifest no longer published) that neither names.
-    /// Models, manifests and snapshots are never collected here.
+    /// orthoview images of `dropped` (the manifest no longer published) that neither names,
+    /// and `dropped` itself. Models, the two published manifests and snapshots are never
+    /// collected here.
     fn collect_garbage(
         &self,
         current: &AggregateManifest,
@@ -1236,6 +1266,11 @@ impl World {
             for hash in old.impostors.values().flat_map(|e| e.blobs()) {
                 delete(hash)?;
             }
+        }
+        // The dropped manifest itself: tens of megabytes on a large world, written by every
+        // publication, so a serving world that kept them would fill its disk.
+        if let Some(hash) = dropped {
+            delete(&hash.to_owned())?;
         }
         match entries.as_mut() {
             // The map holds every recorded entry whose blobs are stored: the stale ones go.

@@ -15,7 +15,7 @@ use horizon_aggregate::{AggregateManifest, AggregateOptions};
 use horizon_bvh::{CutQuery, DEFAULT_MU, DEFAULT_W};
 use horizon_mesh::rng::Rng;
 use horizon_mesh::{export_glb, ExportOptions, Instance, InstancedMesh, Material, Submesh};
-use horizon_world::{BadModel, Change, RebuildReport, User, World, WorldError};
+use horizon_world::{BadModel, Change, RebuildReport, User, World, WorldError, SNAPSHOT_EVERY};
 
 // -------------------------------------------------------------------------------------------
 // Helpers
@@ -407,6 +407,57 @@ fn replay_after_reopening_gives_the_very_same_tree() {
 }
 
 #[test]
+fn a_new_tree_snapshot_replaces_the_old_one_in_the_store() {
+    let dir = TempDir::new("snapshot");
+    let world = built_world(dir.path(), 20);
+    rebuild(&world);
+    let first = world
+        .meta()
+        .snapshot()
+        .expect("snapshot")
+        .expect("a built tree has a snapshot");
+    let ids: Vec<u64> = world
+        .all_objects()
+        .expect("objects")
+        .iter()
+        .map(|o| o.id)
+        .collect();
+    let mut rng = Rng::new(21);
+    let moves: Vec<Change> = (0..SNAPSHOT_EVERY as usize)
+        .map(|k| Change::Move {
+            id: ids[k % ids.len()],
+            transform: placement(&mut rng),
+        })
+        .collect();
+    world.apply(None, &moves).expect("moves");
+    rebuild(&world);
+    let second = world
+        .meta()
+        .snapshot()
+        .expect("snapshot")
+        .expect("still a snapshot");
+    assert!(
+        second.generation >= first.generation + SNAPSHOT_EVERY,
+        "a rebuild {SNAPSHOT_EVERY} generations on takes a new snapshot"
+    );
+    assert_ne!(second.blob, first.blob);
+    assert!(world.blob(&second.blob).expect("read").is_some());
+    assert_eq!(
+        world.blob(&first.blob).expect("read"),
+        None,
+        "the snapshot replaced is deleted, not left for the next open"
+    );
+    let before = tree_state(&world);
+    drop(world);
+    let world = World::open(dir.path()).expect("reopen");
+    world.ensure_tree().expect("the new snapshot loads");
+    assert!(
+        tree_state(&world) == before,
+        "the tree differs after reopening"
+    );
+}
+
+#[test]
 fn a_world_started_empty_keeps_its_objects_in_the_tree_across_a_reopen() {
     // What `horizon serve` does on a new folder: an empty world, models uploaded, objects
     // placed, the process stopped (or killed) and started again.
@@ -641,6 +692,13 @@ fn rebuilds_keep_what_the_published_manifests_name_and_collect_the_rest() {
                     );
                 }
             }
+        }
+        // So are their manifests.
+        for old in hashes.iter().take(n.saturating_sub(2)) {
+            assert!(
+                !stored.contains(old),
+                "round {round}: the manifest {old} of an older build is still stored"
+            );
         }
         // So are their entries.
         let entries: BTreeSet<String> = world

@@ -120,6 +120,9 @@ fn work(world: &World, config: &Config, stop: &AtomicBool) {
                     seconds,
                     build_seconds = report.build.seconds,
                     impostor_seconds = report.build.impostors.as_ref().map_or(0.0, |i| i.seconds),
+                    prepare_seconds = report.overhead.prepare_seconds,
+                    publish_seconds = report.overhead.publish_seconds,
+                    collect_seconds = report.overhead.collect_seconds,
                     level_seconds = ?report
                         .build
                         .level_times
