@@ -175,6 +175,11 @@ pub struct ImpostorReport {
     /// Nodes ray-cast because a child's stored orthoviews could not be read, with why.
     #[serde(default)]
     pub unreadable: Vec<(u32, String)>,
+    /// The children whose stored orthoviews could not be read. They are left out of this
+    /// build's impostors, so their nodes are drawn by their aggregates and the next build
+    /// makes them again.
+    #[serde(default)]
+    pub unreadable_children: Vec<u32>,
 }
 
 /// Builds (or reuses) the impostor of every node that gets one (see the module docs), for
@@ -235,6 +240,7 @@ pub fn build_impostors(
     // Stage 3: make, bottom-up.
     let prepared = PreparedCache::default();
     let unreadable: Mutex<Vec<(u32, String)>> = Mutex::new(Vec::new());
+    let unreadable_children: Mutex<Vec<u32>> = Mutex::new(Vec::new());
     let mut below: HashMap<u32, Arc<Vec<Orthoview>>> = HashMap::new();
     for level in crate::build::levels(bvh).iter().rev() {
         if stop() {
@@ -269,17 +275,22 @@ pub fn build_impostors(
                                     AggregateError::Tree(format!("node {} has no impostor", c.0))
                                 })
                                 .and_then(|e| e.load(store))
-                                .map(Arc::new),
+                                .map(Arc::new)
+                                .map_err(|e| (c.0, e)),
                         })
                         .collect::<Result<Vec<_>, _>>()
                 });
                 // A child whose stored orthoviews cannot be read (damaged, or made by an
-                // older composite) does not stop the build: this node is ray-cast instead.
+                // older composite) does not stop the build: this node is ray-cast instead,
+                // and the child is left out so that it is made again.
                 let (views, rendered) = match kids {
                     Some(Ok(kids)) => (composite_views(&kids, q_of(node.0)), false),
-                    Some(Err(e)) => {
+                    Some(Err((child, e))) => {
                         if let Ok(mut u) = unreadable.lock() {
-                            u.push((node.0, e.to_string()));
+                            u.push((node.0, format!("child {child}: {e}")));
+                        }
+                        if let Ok(mut u) = unreadable_children.lock() {
+                            u.push(child);
                         }
                         let views = render_views(bvh, node, models, &prepared, q_of(node.0))?;
                         (views, true)
@@ -300,6 +311,11 @@ pub fn build_impostors(
         report.built += made.len();
         report.rendered += made.iter().filter(|m| m.2).count();
         out.extend(encoded);
+        if let Ok(children) = unreadable_children.lock() {
+            for child in children.iter() {
+                out.remove(child);
+            }
+        }
         // The level's images become readable, so that the parents read back what is not
         // kept in memory: past `KEPT_VIEW_BYTES` (on 60,000 distinct buildings, the leaves'
         // orthoviews alone are 4 GB).
@@ -328,6 +344,9 @@ pub fn build_impostors(
     report.bytes_total = out.values().map(ImpostorEntry::bytes).sum();
     report.unreadable = unreadable.into_inner().unwrap_or_default();
     report.unreadable.sort();
+    report.unreadable_children = unreadable_children.into_inner().unwrap_or_default();
+    report.unreadable_children.sort_unstable();
+    report.unreadable_children.dedup();
     report.seconds = start.elapsed().as_secs_f64();
     Ok((out, report))
 }

@@ -918,4 +918,34 @@ fn a_child_impostor_that_cannot_be_read_makes_its_parent_ray_cast_not_a_failed_b
         e.load(&store)
             .unwrap_or_else(|err| panic!("node {node}, ray-cast: {err}"));
     }
+    // The children that could not be read are not served: their nodes fall back to their
+    // aggregates, and the next build makes their impostors again.
+    assert!(!imp.unreadable_children.is_empty());
+    for child in &imp.unreadable_children {
+        assert!(
+            !after.impostors.contains_key(child),
+            "node {child}'s unreadable impostor is still in the manifest"
+        );
+        assert!(
+            after.nodes.contains_key(child),
+            "node {child} keeps its aggregate"
+        );
+    }
+    store.damaged.clear();
+    let again = build_aggregates(&bvh, &w.models, &store, &options(&w), &|_| {})
+        .expect("the next build")
+        .report
+        .impostors
+        .expect("an impostor report");
+    assert!(again.unreadable.is_empty());
+    assert!(again.built >= imp.unreadable_children.len());
+    let remade = store.manifest().expect("read").expect("manifest");
+    for child in &imp.unreadable_children {
+        let e = remade
+            .impostors
+            .get(child)
+            .unwrap_or_else(|| panic!("node {child}'s impostor was made again"));
+        e.load(&store)
+            .unwrap_or_else(|err| panic!("node {child}, made again: {err}"));
+    }
 }

@@ -1033,14 +1033,21 @@ impl World {
     }
 
     /// Stores `tree` as the snapshot, which lets the log before it go.
+    /// Records `tree` as the snapshot that loads replay from. The caller holds the writer
+    /// lock, so that no load in this process reads the old snapshot while the log it replays
+    /// is cut.
     fn save_snapshot(&self, tree: &Tree) -> Result<(), WorldError> {
+        self.record_snapshot(tree.generation, &tree.to_snapshot()?)
+    }
+
+    fn record_snapshot(&self, generation: u64, bytes: &[u8]) -> Result<(), WorldError> {
         let before = self.meta.snapshot()?;
-        let blob = self.blobs.put(&tree.to_snapshot()?)?;
+        let blob = self.blobs.put(bytes)?;
         self.meta.put_snapshot(&Snapshot {
-            generation: tree.generation,
+            generation,
             blob: blob.clone(),
         })?;
-        self.lock_status()?.snapshot = tree.generation;
+        self.lock_status()?.snapshot = generation;
         // The snapshot it replaces names nothing now: the log before the new one is gone.
         if let Some(old) = before.filter(|old| old.blob != blob) {
             self.blobs.delete(&old.blob)?;
@@ -1203,7 +1210,9 @@ impl World {
         let removed_blobs =
             self.collect_garbage(&outcome.manifest, &published, dropped.as_deref())?;
         if generation.saturating_sub(self.lock_status()?.snapshot) >= SNAPSHOT_EVERY {
-            self.save_snapshot(&tree)?;
+            let bytes = tree.to_snapshot()?;
+            let _writer = self.lock_writer()?;
+            self.record_snapshot(tree.generation, &bytes)?;
         }
         Ok(RebuildReport {
             build: outcome.report,
@@ -1250,6 +1259,20 @@ impl World {
                 .filter(|e| !kept.contains(e.key.as_str()))
                 .collect(),
         };
+        // The records go first: a crash before the blobs are deleted leaves orphans, which
+        // the next open removes, never a record naming a missing blob.
+        match entries.as_mut() {
+            // The map holds every recorded entry whose blobs are stored: the stale ones go.
+            Some(map) => {
+                let stale_keys: Vec<String> = stale.iter().map(|e| e.key.clone()).collect();
+                self.meta.remove_aggregate_entries(&stale_keys)?;
+                map.retain(|k, _| kept.contains(k.as_str()));
+            }
+            None => {
+                let keys: Vec<String> = kept.iter().map(|k| (*k).to_owned()).collect();
+                self.meta.retain_aggregate_entries(&keys)?;
+            }
+        }
         let mut deleted: HashSet<String> = HashSet::new();
         let mut delete = |hash: &String| -> Result<(), WorldError> {
             if !keep.contains(hash.as_str()) && deleted.insert(hash.clone()) {
@@ -1271,18 +1294,6 @@ impl World {
         // publication, so a serving world that kept them would fill its disk.
         if let Some(hash) = dropped {
             delete(&hash.to_owned())?;
-        }
-        match entries.as_mut() {
-            // The map holds every recorded entry whose blobs are stored: the stale ones go.
-            Some(map) => {
-                let stale_keys: Vec<String> = stale.into_iter().map(|e| e.key).collect();
-                self.meta.remove_aggregate_entries(&stale_keys)?;
-                map.retain(|k, _| kept.contains(k.as_str()));
-            }
-            None => {
-                let keys: Vec<String> = kept.iter().map(|k| (*k).to_owned()).collect();
-                self.meta.retain_aggregate_entries(&keys)?;
-            }
         }
         // Only the two published manifests are read again.
         let names: HashSet<&String> = [&published.manifest, &published.previous_manifest]
