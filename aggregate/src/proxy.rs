@@ -332,7 +332,8 @@ pub const PROXY_SIZES_KEPT: usize = 8;
 
 /// The most texture bytes of one model's kept proxies: small tiles (an upper node's, a few
 /// hundred bytes each) are kept, large ones are made again. The model cache does not count
-/// them, so this bounds what they add to it (at most 32 KB a cached model).
+/// them, so this bounds what they add to it: 32 KB of textures a cached model, plus each kept
+/// proxy's box mesh (about 1 KB, so about [`PROXY_SIZES_KEPT`] KB more).
 pub const PROXY_BYTES_KEPT: usize = 32 << 10;
 
 /// The model's box in model space, each face textured with what the model shows on that side,

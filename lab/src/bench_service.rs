@@ -370,9 +370,9 @@ async fn freshness(
     let (lo, hi) = bounds(&world)?;
     let models = model_ids(&client, url).await?;
     let (tell, published) = tokio::sync::watch::channel(0u64);
-    let poller = {
+    let _poller = {
         let (client, url) = (client.clone(), url.to_owned());
-        tokio::spawn(async move {
+        AbortOnDrop(tokio::spawn(async move {
             loop {
                 let w = match client.get(format!("{url}/v1/world")).send().await {
                     Ok(r) => r.json::<Value>().await.ok(),
@@ -383,7 +383,7 @@ async fn freshness(
                 }
                 tokio::time::sleep(Duration::from_millis(10)).await;
             }
-        })
+        }))
     };
     let mut rng = Rng::new(seed);
     let mut timed = Vec::with_capacity(count);
@@ -421,8 +421,17 @@ async fn freshness(
     for t in timed {
         histogram.record(t.await??.as_micros() as u64)?;
     }
-    poller.abort();
     Ok((percentiles(&histogram), count))
+}
+
+/// A task aborted when this is dropped, so that an early return leaves none running.
+#[derive(Debug)]
+struct AbortOnDrop(tokio::task::JoinHandle<()>);
+
+impl Drop for AbortOnDrop {
+    fn drop(&mut self) {
+        self.0.abort();
+    }
 }
 
 /// Waits until the last generation is published; returns the seconds that took.
@@ -436,7 +445,12 @@ async fn settle(url: &str) -> anyhow::Result<f64> {
             .await?
             .json()
             .await?;
-        if w["published"].as_u64() >= w["generation"].as_u64() {
+        let (Some(published), Some(generation)) =
+            (w["published"].as_u64(), w["generation"].as_u64())
+        else {
+            anyhow::bail!("/v1/world names no generation and published: {w}");
+        };
+        if published >= generation {
             return Ok(started.elapsed().as_secs_f64());
         }
         anyhow::ensure!(
