@@ -361,12 +361,7 @@ async fn freshness(
     seed: u64,
 ) -> anyhow::Result<(Percentiles, usize)> {
     let client = reqwest::Client::new();
-    let world: Value = client
-        .get(format!("{url}/v1/world"))
-        .send()
-        .await?
-        .json()
-        .await?;
+    let world: Value = world_status(&client, url).await?;
     let (lo, hi) = bounds(&world)?;
     let models = model_ids(&client, url).await?;
     let (tell, published) = tokio::sync::watch::channel(0u64);
@@ -424,6 +419,16 @@ async fn freshness(
     Ok((percentiles(&histogram), count))
 }
 
+/// `GET /v1/world`, parsed.
+async fn world_status(client: &reqwest::Client, url: &str) -> anyhow::Result<Value> {
+    Ok(client
+        .get(format!("{url}/v1/world"))
+        .send()
+        .await?
+        .json()
+        .await?)
+}
+
 /// A task aborted when this is dropped, so that an early return leaves none running.
 #[derive(Debug)]
 struct AbortOnDrop(tokio::task::JoinHandle<()>);
@@ -439,12 +444,7 @@ async fn settle(url: &str) -> anyhow::Result<f64> {
     let client = reqwest::Client::new();
     let started = Instant::now();
     loop {
-        let w: Value = client
-            .get(format!("{url}/v1/world"))
-            .send()
-            .await?
-            .json()
-            .await?;
+        let w: Value = world_status(&client, url).await?;
         let (Some(published), Some(generation)) =
             (w["published"].as_u64(), w["generation"].as_u64())
         else {
@@ -471,12 +471,7 @@ async fn sustain(
     seed: u64,
 ) -> anyhow::Result<Sustained> {
     let client = reqwest::Client::new();
-    let world: Value = client
-        .get(format!("{url}/v1/world"))
-        .send()
-        .await?
-        .json()
-        .await?;
+    let world: Value = world_status(&client, url).await?;
     let (lo, hi) = bounds(&world)?;
     let models = model_ids(&client, url).await?;
     let sampler = {
@@ -531,12 +526,7 @@ async fn sustain(
         mutations += 1;
     }
     let (max_dirty_nodes, max_generation_lag) = sampler.await?;
-    let w: Value = client
-        .get(format!("{url}/v1/world"))
-        .send()
-        .await?
-        .json()
-        .await?;
+    let w: Value = world_status(&client, url).await?;
     let final_lag = w["generation"]
         .as_u64()
         .unwrap_or(0)
