@@ -1019,8 +1019,7 @@ impl World {
     /// older than the manifest).
     pub fn with_served<T>(&self, f: impl FnOnce(&Served<'_>) -> T) -> Result<T, WorldError> {
         self.ensure_tree()?;
-        let published = self.lock_status()?.published.clone();
-        let manifest = self.read_manifest(published.manifest.as_deref())?;
+        let (published, manifest) = self.published_and_manifest()?;
         let tree = self.read_tree()?;
         let tree = tree
             .as_ref()
@@ -1032,10 +1031,9 @@ impl World {
         }))
     }
 
-    /// Stores `tree` as the snapshot, which lets the log before it go.
-    /// Records `tree` as the snapshot that loads replay from. The caller holds the writer
-    /// lock, so that no load in this process reads the old snapshot while the log it replays
-    /// is cut.
+    /// Records `tree` as the snapshot that loads replay from, which lets the log before it go.
+    /// The caller holds the writer lock, so that no load in this process reads the old
+    /// snapshot while the log it replays is cut.
     fn save_snapshot(&self, tree: &Tree) -> Result<(), WorldError> {
         self.record_snapshot(tree.generation, &tree.to_snapshot()?)
     }
@@ -1061,8 +1059,29 @@ impl World {
 
     /// The manifest being served.
     pub fn published_manifest(&self) -> Result<Option<Arc<AggregateManifest>>, WorldError> {
-        let published = self.lock_status()?.published.clone();
-        self.read_manifest(published.manifest.as_deref())
+        Ok(self.published_and_manifest()?.1)
+    }
+
+    /// The published record and its manifest. A manifest is collected once two newer ones
+    /// are published, so a reader that lost that race reads the newer record again.
+    fn published_and_manifest(
+        &self,
+    ) -> Result<(Published, Option<Arc<AggregateManifest>>), WorldError> {
+        let mut published = self.lock_status()?.published.clone();
+        let mut attempts = 0;
+        loop {
+            match self.read_manifest(published.manifest.as_deref()) {
+                Ok(manifest) => return Ok((published, manifest)),
+                Err(e) => {
+                    attempts += 1;
+                    let now = self.lock_status()?.published.clone();
+                    if now.manifest == published.manifest || attempts == 3 {
+                        return Err(e);
+                    }
+                    published = now;
+                }
+            }
+        }
     }
 
     fn read_manifest(
