@@ -239,8 +239,8 @@ pub fn build_impostors(
     }
     // Stage 3: make, bottom-up.
     let prepared = PreparedCache::default();
-    let unreadable: Mutex<Vec<(u32, String)>> = Mutex::new(Vec::new());
-    let unreadable_children: Mutex<Vec<u32>> = Mutex::new(Vec::new());
+    // (node ray-cast instead, its child that could not be read, why).
+    let unreadable: Mutex<Vec<(u32, u32, String)>> = Mutex::new(Vec::new());
     let mut below: HashMap<u32, Arc<Vec<Orthoview>>> = HashMap::new();
     for level in crate::build::levels(bvh).iter().rev() {
         if stop() {
@@ -287,10 +287,7 @@ pub fn build_impostors(
                     Some(Ok(kids)) => (composite_views(&kids, q_of(node.0)), false),
                     Some(Err((child, e))) => {
                         if let Ok(mut u) = unreadable.lock() {
-                            u.push((node.0, format!("child {child}: {e}")));
-                        }
-                        if let Ok(mut u) = unreadable_children.lock() {
-                            u.push(child);
+                            u.push((node.0, child, e.to_string()));
                         }
                         let views = render_views(bvh, node, models, &prepared, q_of(node.0))?;
                         (views, true)
@@ -311,8 +308,8 @@ pub fn build_impostors(
         report.built += made.len();
         report.rendered += made.iter().filter(|m| m.2).count();
         out.extend(encoded);
-        if let Ok(children) = unreadable_children.lock() {
-            for child in children.iter() {
+        if let Ok(u) = unreadable.lock() {
+            for (_, child, _) in u.iter() {
                 out.remove(child);
             }
         }
@@ -342,9 +339,13 @@ pub fn build_impostors(
         .max()
         .unwrap_or(0);
     report.bytes_total = out.values().map(ImpostorEntry::bytes).sum();
-    report.unreadable = unreadable.into_inner().unwrap_or_default();
+    let unreadable = unreadable.into_inner().unwrap_or_default();
+    report.unreadable = unreadable
+        .iter()
+        .map(|(node, child, why)| (*node, format!("child {child}: {why}")))
+        .collect();
     report.unreadable.sort();
-    report.unreadable_children = unreadable_children.into_inner().unwrap_or_default();
+    report.unreadable_children = unreadable.iter().map(|(_, child, _)| *child).collect();
     report.unreadable_children.sort_unstable();
     report.unreadable_children.dedup();
     report.seconds = start.elapsed().as_secs_f64();

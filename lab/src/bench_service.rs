@@ -369,10 +369,7 @@ async fn freshness(
         let (client, url) = (client.clone(), url.to_owned());
         AbortOnDrop(tokio::spawn(async move {
             loop {
-                let w = match client.get(format!("{url}/v1/world")).send().await {
-                    Ok(r) => r.json::<Value>().await.ok(),
-                    Err(_) => None,
-                };
+                let w = world_status(&client, &url).await.ok();
                 if let Some(p) = w.and_then(|w| w["published"].as_u64()) {
                     tell.send_if_modified(|v| std::mem::replace(v, p) != p);
                 }
@@ -480,13 +477,11 @@ async fn sustain(
             let (mut dirty, mut lag) = (0u64, 0u64);
             let end = Instant::now() + Duration::from_secs(seconds);
             while Instant::now() < end {
-                if let Ok(r) = client.get(format!("{url}/v1/world")).send().await {
-                    if let Ok(w) = r.json::<Value>().await {
-                        dirty = dirty.max(w["dirty_nodes"].as_u64().unwrap_or(0));
-                        let g = w["generation"].as_u64().unwrap_or(0);
-                        let p = w["published"].as_u64().unwrap_or(0);
-                        lag = lag.max(g.saturating_sub(p));
-                    }
+                if let Ok(w) = world_status(&client, &url).await {
+                    dirty = dirty.max(w["dirty_nodes"].as_u64().unwrap_or(0));
+                    let g = w["generation"].as_u64().unwrap_or(0);
+                    let p = w["published"].as_u64().unwrap_or(0);
+                    lag = lag.max(g.saturating_sub(p));
                 }
                 tokio::time::sleep(Duration::from_millis(100)).await;
             }

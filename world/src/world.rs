@@ -1031,13 +1031,15 @@ impl World {
         }))
     }
 
-    /// Records `tree` as the snapshot that loads replay from, which lets the log before it go.
-    /// The caller holds the writer lock, so that no load in this process reads the old
-    /// snapshot while the log it replays is cut.
+    /// [`World::record_snapshot`] of `tree`.
     fn save_snapshot(&self, tree: &Tree) -> Result<(), WorldError> {
         self.record_snapshot(tree.generation, &tree.to_snapshot()?)
     }
 
+    /// Records `bytes` (a tree snapshot at `generation`) as the snapshot that loads replay
+    /// from, which lets the log before it go, and deletes the one it replaces. The caller
+    /// holds the writer lock, so that no load in this process reads the old snapshot while
+    /// the log it replays is cut.
     fn record_snapshot(&self, generation: u64, bytes: &[u8]) -> Result<(), WorldError> {
         let before = self.meta.snapshot()?;
         let blob = self.blobs.put(bytes)?;

@@ -191,13 +191,18 @@ struct TreeState {
     cuts: Vec<horizon_bvh::Cut>,
 }
 
-fn tree_state(world: &World) -> TreeState {
-    let ids: Vec<u64> = world
+/// The ids of every object of `world`.
+fn object_ids(world: &World) -> Vec<u64> {
+    world
         .all_objects()
         .expect("objects")
         .iter()
         .map(|o| o.id)
-        .collect();
+        .collect()
+}
+
+fn tree_state(world: &World) -> TreeState {
+    let ids: Vec<u64> = object_ids(world);
     world
         .with_tree(|t| {
             t.bvh.validate().expect("the tree validates");
@@ -416,12 +421,7 @@ fn a_new_tree_snapshot_replaces_the_old_one_in_the_store() {
         .snapshot()
         .expect("snapshot")
         .expect("a built tree has a snapshot");
-    let ids: Vec<u64> = world
-        .all_objects()
-        .expect("objects")
-        .iter()
-        .map(|o| o.id)
-        .collect();
+    let ids: Vec<u64> = object_ids(&world);
     let mut rng = Rng::new(21);
     let moves: Vec<Change> = (0..SNAPSHOT_EVERY as usize)
         .map(|k| Change::Move {
@@ -495,12 +495,7 @@ fn a_change_during_a_build_stays_dirty_for_the_next() {
     let dir = TempDir::new("during");
     let world = built_world(dir.path(), 24);
     rebuild(&world);
-    let ids: Vec<u64> = world
-        .all_objects()
-        .expect("objects")
-        .iter()
-        .map(|o| o.id)
-        .collect();
+    let ids: Vec<u64> = object_ids(&world);
 
     // A change before the build.
     let first = world
@@ -637,12 +632,7 @@ fn rebuilds_keep_what_the_published_manifests_name_and_collect_the_rest() {
     for round in 0..4 {
         if round > 0 {
             // Move a few objects far apart, so that the aggregates above them change.
-            let ids: Vec<u64> = world
-                .all_objects()
-                .expect("objects")
-                .iter()
-                .map(|o| o.id)
-                .collect();
+            let ids: Vec<u64> = object_ids(&world);
             let changes: Vec<Change> = (0..3)
                 .map(|k| Change::Move {
                     id: ids[(round * 7 + k * 5) % ids.len()],
