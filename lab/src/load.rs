@@ -2,8 +2,8 @@
 //! on `GET /v1/stream` and walk seeded paths through the world, sending a view H times a
 //! second; a mutation client places, moves and deletes objects R times a second. Reported:
 //! camera-update-to-delta latency (p50, p99, p999), deltas per second, bytes per second per
-//! viewer, views the server coalesced, errors, and the server's CPU and memory (from
-//! `/proc`, when it runs on this machine).
+//! viewer, views the server coalesced, carried without planning or planned to no change,
+//! errors, and the server's CPU and memory (from `/proc`, when it runs on this machine).
 //!
 //! Latency is the time from sending a view to receiving the first message that names it
 //! (`view` in a reset or delta). A view that does not change the cut gets no message and no
@@ -97,6 +97,12 @@ pub struct Report {
     pub placements_per_second_per_viewer: f64,
     /// Views the server replaced by a later one before planning them (from `/metrics`).
     pub coalesced: Option<u64>,
+    /// Views the server answered by carrying the held plan to the new eye, without
+    /// planning (`horizon_stream_decisions_held_total`).
+    pub carried: Option<u64>,
+    /// Views the server planned again to find the cut unchanged
+    /// (`horizon_stream_unchanged_total`).
+    pub planned_unchanged: Option<u64>,
     /// Mutations that got a 2xx.
     pub mutations_ok: u64,
     /// Errors: failed mutations, error messages, closed or failed streams.
@@ -182,6 +188,12 @@ pub fn print(r: &Report, json: bool) -> anyhow::Result<()> {
         r.samples,
         r.views_sent,
         r.coalesced.map_or("?".into(), |c| c.to_string())
+    )?;
+    let count = |c: Option<u64>| c.map_or("?".into(), |c| c.to_string());
+    outln!(
+        "views the server carried without planning: {}; planned to no change: {}",
+        count(r.carried),
+        count(r.planned_unchanged)
     )?;
     outln!(
         "first cut: p50 {:.0} ms, p99 {:.0} ms; {:.0} deltas/s; {:.0} B/s and {:.0} placements/s per viewer; {} mutations; {} errors {:?}",
@@ -331,7 +343,7 @@ async fn load(args: &Args) -> anyhow::Result<Report> {
     }
     // Every viewer has its first cut: measure from here.
     connected.wait().await;
-    let metrics_before = coalesced(&http, &args.url).await;
+    let metrics_before = stream_counters(&http, &args.url).await;
     let cpu_before = pid.and_then(cpu_seconds);
     let t0 = Instant::now();
     if let Ok(mut s) = started_measuring.lock() {
@@ -351,7 +363,7 @@ async fn load(args: &Args) -> anyhow::Result<Report> {
     let seconds = t0.elapsed().as_secs_f64();
     let cpu_after = pid.and_then(cpu_seconds);
     let rss_end = pid.and_then(rss);
-    let metrics_after = coalesced(&http, &args.url).await;
+    let metrics_after = stream_counters(&http, &args.url).await;
     let _ = stop.send(true);
     for t in tasks {
         let _ = t.await;
@@ -377,9 +389,9 @@ async fn load(args: &Args) -> anyhow::Result<Report> {
         placements_per_second_per_viewer: tally.placements.load(Ordering::Relaxed) as f64
             / seconds
             / args.viewers.max(1) as f64,
-        coalesced: metrics_before
-            .zip(metrics_after)
-            .map(|(a, b)| b.saturating_sub(a)),
+        coalesced: counted(metrics_before, metrics_after, 0),
+        carried: counted(metrics_before, metrics_after, 1),
+        planned_unchanged: counted(metrics_before, metrics_after, 2),
         mutations_ok: tally.mutations_ok.load(Ordering::Relaxed),
         errors: tally.errors.load(Ordering::Relaxed),
         error_samples: tally.samples.lock().map(|s| s.clone()).unwrap_or_default(),
@@ -645,8 +657,9 @@ async fn mutate(
     }
 }
 
-/// `horizon_stream_coalesced_total` from the server's `/metrics`.
-async fn coalesced(http: &reqwest::Client, url: &str) -> Option<u64> {
+/// The server's stream counters, from its `/metrics`: views coalesced, carried and planned
+/// to no change (see [`Report`]).
+async fn stream_counters(http: &reqwest::Client, url: &str) -> Option<[u64; 3]> {
     let text = http
         .get(format!("{url}/metrics"))
         .send()
@@ -655,12 +668,22 @@ async fn coalesced(http: &reqwest::Client, url: &str) -> Option<u64> {
         .text()
         .await
         .ok()?;
-    Some(
+    let total = |name: &str| {
         text.lines()
-            .filter(|l| l.starts_with("horizon_stream_coalesced_total"))
+            .filter(|l| l.split(['{', ' ']).next() == Some(name))
             .filter_map(|l| l.split_whitespace().last()?.parse::<f64>().ok())
-            .sum::<f64>() as u64,
-    )
+            .sum::<f64>() as u64
+    };
+    Some([
+        total("horizon_stream_coalesced_total"),
+        total("horizon_stream_decisions_held_total"),
+        total("horizon_stream_unchanged_total"),
+    ])
+}
+
+/// Counter `k` of [`stream_counters`] over the measured time.
+fn counted(before: Option<[u64; 3]>, after: Option<[u64; 3]>, k: usize) -> Option<u64> {
+    before.zip(after).map(|(a, b)| b[k].saturating_sub(a[k]))
 }
 
 /// The one `horizon serve` process on this machine, if there is exactly one.

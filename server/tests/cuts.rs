@@ -1126,9 +1126,9 @@ async fn where_a_plans_decisions_hold_planning_again_gives_the_same_cut() {
             moved.eye[i] += f64::from(dir[i]) * step;
         }
         let holds = world
-            .with_served(|served| plan.holds_at(served.tree, moved.eye))
+            .with_served(|served| plan.clone().carry_to(served.tree, moved.eye))
             .unwrap();
-        let again = state.plan(&moved).unwrap();
+        let again = state.plan_after(&moved, Some(&plan)).unwrap();
         let same = as_set(&again) == before && again.stopped_by == plan.stopped_by;
         if holds {
             assert!(
@@ -1292,14 +1292,14 @@ async fn impostors_stand_for_far_nodes_and_cuts_stay_complete() {
             moved.eye[i] += f64::from(dir[i]) * step;
         }
         let holds = world
-            .with_served(|served| plan.holds_at(served.tree, moved.eye))
+            .with_served(|served| plan.clone().carry_to(served.tree, moved.eye))
             .unwrap();
         if holds {
             let ids = |p: &horizon_server::service::cut::Plan| -> HashSet<String> {
                 p.entries().into_iter().map(|e| e.id).collect()
             };
             assert_eq!(
-                ids(&state.plan(&moved).unwrap()),
+                ids(&state.plan_after(&moved, Some(&plan)).unwrap()),
                 ids(&plan),
                 "round {round}"
             );

@@ -8,7 +8,7 @@
 //! held: the same nodes, hence the same aggregate keys, so nothing built is rebuilt after a
 //! restart.
 
-use std::collections::{BTreeMap, BTreeSet, HashMap};
+use std::collections::{BTreeMap, BTreeSet};
 
 use glam::{Affine3A, Vec3};
 use horizon_bvh::{Bvh, NewObject, NodeId, ObjectId, Sphere};
@@ -36,8 +36,9 @@ pub struct Tree {
     /// The same, ordered by generation: the objects placed after a generation (the pending
     /// objects of a cut) are a range of it.
     by_generation: BTreeSet<(u64, u64)>,
-    /// Model number -> how many objects the tree places with it.
-    uses: HashMap<u64, u32>,
+    /// Model number -> how many objects the tree places with it (model numbers are the
+    /// store's dense row numbers; the cut reads this once per placement it weighs).
+    uses: Vec<u32>,
 }
 
 /// What a snapshot stores.
@@ -90,11 +91,11 @@ impl Tree {
 
     fn with_ids(bvh: Bvh, generation: u64, ids: BTreeMap<u64, ObjectId>) -> Self {
         let mut back = Vec::new();
-        let mut uses = HashMap::new();
+        let mut uses = Vec::new();
         for (&w, &t) in &ids {
             set_slot(&mut back, t, w);
             if let Some(o) = bvh.object(t) {
-                *uses.entry(o.model()).or_insert(0) += 1;
+                count_use(&mut uses, o.model(), 1);
             }
         }
         Self {
@@ -176,7 +177,7 @@ impl Tree {
             (Some((model, transform)), None) => {
                 let d = descriptors.descriptors_of(model)?;
                 let id = self.bvh.insert(&new_object(model, transform, &d))?;
-                *self.uses.entry(model).or_insert(0) += 1;
+                count_use(&mut self.uses, model, 1);
                 self.ids.insert(change.object, id);
                 set_slot(&mut self.back, id, change.object);
                 self.place(change.object, change.generation);
@@ -192,8 +193,8 @@ impl Tree {
             (None, Some(id)) => {
                 let model = self.bvh.object(id).map(|o| o.model());
                 self.bvh.remove(id)?;
-                if let Some(n) = model.and_then(|m| self.uses.get_mut(&m)) {
-                    *n = n.saturating_sub(1);
+                if let Some(model) = model {
+                    count_use(&mut self.uses, model, -1);
                 }
                 self.unplace(change.object);
                 self.ids.remove(&change.object);
@@ -214,7 +215,11 @@ impl Tree {
 
     /// How many objects the tree places with model `model`.
     pub fn uses(&self, model: u64) -> u32 {
-        self.uses.get(&model).copied().unwrap_or(0)
+        usize::try_from(model)
+            .ok()
+            .and_then(|m| self.uses.get(m))
+            .copied()
+            .unwrap_or(0)
     }
 
     /// The tree id of a world object.
@@ -274,6 +279,17 @@ fn set_slot(table: &mut Vec<u64>, id: ObjectId, value: u64) {
         table.resize(i + 1, NO_SLOT);
     }
     table[i] = value;
+}
+
+/// Adds `delta` (1 or -1) to `model`'s count of uses, growing the table.
+fn count_use(uses: &mut Vec<u32>, model: u64, delta: i32) {
+    let Ok(m) = usize::try_from(model) else {
+        return;
+    };
+    if uses.len() <= m {
+        uses.resize(m + 1, 0);
+    }
+    uses[m] = uses[m].saturating_add_signed(delta);
 }
 
 /// A placed model's world bounding sphere: its model sphere through its transform.

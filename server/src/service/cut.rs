@@ -118,11 +118,12 @@ pub struct Plan {
 }
 
 /// The decisions that made a plan, by the node: with the same tree and the same view but
-/// for the eye, planning again (with this plan held, [`plan_after`]) gives the same plan
-/// exactly when [`Plan::holds_at`] the new eye: these decisions hold there
-/// ([`Decisions::hold_at`]) and so does every object's level. Refinement took the nodes of `refined` in order of their worst-case solid angle
-/// (each at least `min_solid_angle`), then either ran out of nodes at or over it, or a
-/// budget refused `stopper`; `frontier` is every other node in the cut.
+/// for the eye, planning again (with this plan held, [`plan_after`]) gives the same cut
+/// when these decisions hold at the new eye ([`Decisions::hold_at`]) and so do the levels
+/// that reach the wire ([`Plan::carry_to`]). Refinement took the nodes of `refined` in order
+/// of their worst-case solid angle (each at least `min_solid_angle`), then either ran out of
+/// nodes at or over it, or a budget refused `stopper`; `frontier` is every other node in the
+/// cut.
 #[derive(Clone, Debug, Default)]
 pub struct Decisions {
     min_solid_angle: f32,
@@ -144,6 +145,12 @@ pub struct Decisions {
     /// The level of every object [`Planner::share_models`] looked at, which with the cut
     /// refinement made decides what it switches.
     examined: Vec<(ObjectId, u8)>,
+    /// Every object whose level the plan consulted, with that level: planning again, with
+    /// the same node decisions and these levels, takes every step the same way.
+    consulted: Vec<(ObjectId, u8)>,
+    /// Where each consulted level stays as it is, made at the first [`Plan::carry_to`]
+    /// (empty before, and again once levels change).
+    bands: Vec<LevelBand>,
     /// Every node with an impostor that refinement put in the cut (also those refined later),
     /// and the views it was charged for (0: none, its aggregate), with what deciding that
     /// again needs.
@@ -424,6 +431,85 @@ impl ModelAsset {
             }
         }
         fresh as u8
+    }
+
+    /// The open range of distances (as [`ModelAsset::choose`] takes them) at which
+    /// `choose` surely gives `level`, with `held` and the rest as given; empty where it
+    /// cannot tell. The edges are pulled in by a margin far above f32 rounding, so that a
+    /// distance inside is `level` to the bit.
+    ///
+    /// Level k passes at distance d when d >= D_k, where D_k is
+    /// `max(error_k / max_pixel_error, texel_k) * scale / pixel_angle` (scaled by the
+    /// hysteresis factor), and `choose` takes the last level that passes. Afresh, `level`
+    /// holds from D_level (level 0: from anywhere) up to the nearest D_k of a coarser level.
+    /// Held, it holds from the nearest D_k of it or a coarser level divided by
+    /// [`LEVEL_MARGIN`], up to that of a coarser level times it.
+    pub fn band(
+        &self,
+        level: u8,
+        held: Option<u8>,
+        scale: f32,
+        pixel_angle: f32,
+        max_pixel_error: f32,
+    ) -> (f32, f32) {
+        const EMPTY: (f32, f32) = (f32::INFINITY, f32::NEG_INFINITY);
+        if max_pixel_error <= 0.0 || self.levels.len() < 2 || scale <= 0.0 {
+            return if level == 0 {
+                (f32::NEG_INFINITY, f32::INFINITY)
+            } else {
+                EMPTY
+            };
+        }
+        let l = usize::from(level);
+        if l >= self.levels.len() || pixel_angle <= 0.0 {
+            return EMPTY;
+        }
+        let at = |k: &LevelAsset| {
+            let t = (f64::from(k.error) / f64::from(max_pixel_error)).max(f64::from(k.texel));
+            t * f64::from(scale) / f64::from(pixel_angle)
+        };
+        let nearest = |from: usize| {
+            self.levels[from..]
+                .iter()
+                .map(at)
+                .fold(f64::INFINITY, f64::min)
+        };
+        let coarser = nearest(l + 1);
+        let margin = f64::from(LEVEL_MARGIN);
+        let (lo, hi) = match held.map(usize::from) {
+            Some(h) if h == l => {
+                let lo = if l == 0 {
+                    f64::NEG_INFINITY
+                } else {
+                    nearest(l) / margin
+                };
+                (lo, coarser * margin)
+            }
+            Some(h) if h < self.levels.len() => return EMPTY,
+            _ => {
+                let lo = if l == 0 {
+                    f64::NEG_INFINITY
+                } else {
+                    at(&self.levels[l])
+                };
+                (lo, coarser)
+            }
+        };
+        // Far above f32's relative rounding (6e-8) in the distance and the footprint; and
+        // positive, since `choose` takes a distance below 0 as 0.
+        const SURE: f64 = 1e-4;
+        let lo = lo.max(0.0);
+        let lo = lo + lo * SURE + 1e-6;
+        let hi = if hi.is_finite() {
+            hi - hi.abs() * SURE - 1e-6
+        } else {
+            hi
+        };
+        if lo < hi {
+            (lo as f32, hi as f32)
+        } else {
+            EMPTY
+        }
     }
 
     fn level(&self, level: u8) -> &LevelAsset {
@@ -881,7 +967,7 @@ impl<'a> Planner<'a> {
     /// instances, if the budgets allow.
     /// Each switch brings models that make others cheaper, so it repeats, nodes in id order,
     /// until none switches. It depends only on the cut refinement made and the levels of the
-    /// objects it looks at, which [`Decisions`] keep for [`Plan::holds_at`].
+    /// objects it looks at, which [`Decisions`] keep for [`Plan::carry_to`].
     fn share_models(&mut self) {
         if !self.view.instances {
             return;
@@ -1303,6 +1389,8 @@ impl<'a> Planner<'a> {
             levels: Vec::new(),
             instances: std::mem::take(&mut self.instance_choices),
             examined: std::mem::take(&mut self.examined),
+            consulted: Vec::new(),
+            bands: Vec::new(),
             impostors: {
                 let mut choices = std::mem::take(&mut self.impostor_choices);
                 choices.sort_unstable_by_key(|&(n, _)| n.0);
@@ -1407,6 +1495,7 @@ impl<'a> Planner<'a> {
                 _ => {}
             }
         }
+        decisions.consulted = consulted(&self.chosen);
         if self.budgets.max_triangles.is_none() {
             share_levels(&mut items, &self.held_model_levels);
         }
@@ -1465,29 +1554,63 @@ fn share_levels(items: &mut [Planned], held: &HashMap<u64, u8>) {
         }
     }
     for (model, f) in finest.iter_mut() {
-        if let Some(&h) = held.get(model) {
-            if h <= *f && *f - h <= MODEL_LEVEL_SLACK {
-                *f = h;
-            }
-        }
+        *f = shared_level(*f, held.get(model).copied());
     }
     for p in items.iter_mut() {
         match (&mut p.what, &mut p.key) {
             (Drawn::Object { model, .. }, Key::Object { level, .. }) => *level = finest[model],
             (Drawn::Instances(instances), _) => {
-                let set = |i: &mut Instance| i.level = finest[&i.model];
-                match Arc::get_mut(instances) {
-                    Some(own) => own.iter_mut().for_each(set),
-                    None => {
-                        let mut shared = instances.to_vec();
-                        shared.iter_mut().for_each(set);
-                        *instances = shared.into();
-                    }
+                for i in instances_mut(instances) {
+                    i.level = finest[&i.model];
                 }
             }
             _ => {}
         }
     }
+}
+
+/// The level a model's objects share when the finest any needs is `finest` and a client
+/// holds it at `held`: the held level while it is at least as fine and at most
+/// [`MODEL_LEVEL_SLACK`] finer, else the finest needed.
+fn shared_level(finest: u8, held: Option<u8>) -> u8 {
+    match held {
+        Some(h) if h <= finest && finest - h <= MODEL_LEVEL_SLACK => h,
+        _ => finest,
+    }
+}
+
+/// An instances entry's objects to change, copied first if another plan shares them.
+fn instances_mut(instances: &mut Arc<[Instance]>) -> &mut [Instance] {
+    if Arc::get_mut(instances).is_none() {
+        *instances = instances.to_vec().into();
+    }
+    Arc::get_mut(instances).expect("a copy no other plan holds")
+}
+
+/// Every level a planner's chooser holds, by tree id.
+fn consulted(chosen: &[std::cell::Cell<u8>]) -> Vec<(ObjectId, u8)> {
+    chosen
+        .iter()
+        .enumerate()
+        .filter(|(_, l)| l.get() != UNCHOSEN)
+        .map(|(o, l)| (ObjectId(o as u32), l.get()))
+        .collect()
+}
+
+/// The distances from an eye to an object's sphere at which its level of detail is surely
+/// `level` ([`ModelAsset::band`]): a plan carried to a new eye checks these instead of
+/// choosing 60,000 levels again, and chooses again only outside them.
+#[derive(Clone, Copy, Debug)]
+struct LevelBand {
+    object: ObjectId,
+    centre: Vec3,
+    radius: f32,
+    /// The level is `level` at distances strictly between these.
+    lo: f32,
+    hi: f32,
+    level: u8,
+    /// The level planning again holds the object to ([`UNCHOSEN`]: none).
+    held: u8,
 }
 
 /// What names an instances entry's content: a hash of `words` of each instance, in the order
@@ -1510,7 +1633,7 @@ fn instances_content<const N: usize>(
 }
 
 /// How a plan chooses objects' levels of detail, and weighs a node's instances against its
-/// aggregate: the planner and [`Plan::holds_at`] both use it, so that they agree to the bit.
+/// aggregate: the planner and [`Plan::carry_to`] both use it, so that they agree to the bit.
 struct LevelChooser<'a> {
     tree: &'a horizon_world::Tree,
     models: &'a Models,
@@ -1561,17 +1684,16 @@ impl LevelChooser<'_> {
     /// Whether `node` costs less drawn as its objects' models than as its aggregate `a`.
     ///
     /// Each object is charged its level's bytes and draw calls divided by the number of
-    /// objects in the world that share its model: a model placed a thousand times is
-    /// downloaded once for all of them, so each placement owes a thousandth of it. A node
-    /// of distinct models is charged every model whole. Instances win when that share is at
-    /// most the aggregate's bytes and at most its draw calls. The sum is taken in the
-    /// tree's order and given up as soon as it passes either, so a node of distinct models
-    /// costs a few objects' visits. A node with an object whose model is not in the table
-    /// cannot be drawn as instances.
+    /// objects in the world that share its model ([`share`]): a model placed a thousand
+    /// times is downloaded once for all of them, so each placement owes a thousandth of it.
+    /// A node of distinct models is charged every model whole. Instances win when that
+    /// share is at most the aggregate's bytes and at most its draw calls ([`fits`]). The sum
+    /// is taken in the tree's order and given up as soon as it passes either, so a node of
+    /// distinct models costs a few objects' visits. A node with an object whose model is not
+    /// in the table cannot be drawn as instances.
     fn instances_win(&self, node: NodeId, a: &NodeAsset) -> bool {
         let bvh = &self.tree.bvh;
-        let (limit_bytes, limit_calls) = (a.bytes as f64, a.draw_calls as f64);
-        let (mut bytes, mut calls) = (0.0f64, 0.0f64);
+        let (mut bytes, mut calls) = (0u64, 0u64);
         let mut stack = vec![node];
         while let Some(n) = stack.pop() {
             let Some(r) = bvh.node(n) else {
@@ -1582,23 +1704,89 @@ impl LevelChooser<'_> {
                 continue;
             }
             for o in r.objects() {
-                let Some(model) = bvh.object(o).map(|x| x.model()) else {
+                let Some((b, c)) = self.placement_share(o) else {
                     return false;
                 };
-                let Some(m) = self.models.get(model as usize).and_then(Option::as_ref) else {
-                    return false;
-                };
-                let l = m.level(self.of(o));
-                let share = 1.0 / f64::from(self.tree.uses(model).max(1));
-                bytes += l.bytes as f64 * share;
-                calls += l.draw_calls as f64 * share;
-                if bytes > limit_bytes || calls > limit_calls {
+                bytes = bytes.saturating_add(b);
+                calls = calls.saturating_add(c);
+                if !fits(a, (bytes, calls)) {
                     return false;
                 }
             }
         }
         true
     }
+
+    /// What one placement of `o` owes of its model level's bytes and draw calls ([`share`]);
+    /// none when its model is not in the table.
+    fn placement_share(&self, o: ObjectId) -> Option<(u64, u64)> {
+        let model = self.tree.bvh.object(o)?.model();
+        let m = self.models.get(model as usize).and_then(Option::as_ref)?;
+        let l = m.level(self.of(o));
+        let uses = self.tree.uses(model);
+        Some((share(l.bytes, uses), share(l.draw_calls, uses)))
+    }
+
+    /// [`LevelChooser::instances_win`] of every node of `weighed` at once: each node's
+    /// placements' shares summed bottom-up over the tree from `root`, so that nested nodes
+    /// do not walk their objects again. Integer shares make the sums the same in any order,
+    /// so each answer is the early-exit walk's to the bit.
+    fn instances_win_all(
+        &self,
+        root: NodeId,
+        weighed: &HashSet<NodeId>,
+        nodes: &NodeAssets,
+    ) -> HashMap<NodeId, bool> {
+        // A node's total, or none where an object under it cannot be weighed.
+        let mut totals: HashMap<NodeId, Option<(u64, u64)>> = HashMap::new();
+        let mut out = HashMap::new();
+        let bvh = &self.tree.bvh;
+        // Post-order: a node is pushed again (`true`) after its children.
+        let mut stack = vec![(root, false)];
+        while let Some((n, children_done)) = stack.pop() {
+            let Some(r) = bvh.node(n) else {
+                totals.insert(n, None);
+                continue;
+            };
+            let total = if r.is_leaf() {
+                r.objects().try_fold((0u64, 0u64), |(b, c), o| {
+                    let (pb, pc) = self.placement_share(o)?;
+                    Some((b.saturating_add(pb), c.saturating_add(pc)))
+                })
+            } else if !children_done {
+                stack.push((n, true));
+                stack.extend(r.child_nodes().map(|c| (c, false)));
+                continue;
+            } else {
+                r.child_nodes().try_fold((0u64, 0u64), |(b, c), child| {
+                    let (cb, cc) = totals.get(&child).copied().flatten()?;
+                    Some((b.saturating_add(cb), c.saturating_add(cc)))
+                })
+            };
+            totals.insert(n, total);
+            if weighed.contains(&n) {
+                let asset = nodes.get(n.0 as usize).and_then(Option::as_ref);
+                let won = total.zip(asset).is_some_and(|(t, a)| fits(a, t));
+                out.insert(n, won);
+            }
+        }
+        out
+    }
+}
+
+/// Units of a placement's share of a byte or a draw call: shares are whole units so that
+/// their sums do not depend on the order they are taken in.
+const SHARE_UNIT: u64 = 1 << 10;
+
+/// One placement's share of `value` (a model level's bytes or draw calls) when `uses`
+/// placements share the model, in [`SHARE_UNIT`]s.
+fn share(value: u64, uses: u32) -> u64 {
+    value.saturating_mul(SHARE_UNIT) / u64::from(uses.max(1))
+}
+
+/// Whether placements' shares `(bytes, draw_calls)` cost at most aggregate `a`.
+fn fits(a: &NodeAsset, (bytes, calls): (u64, u64)) -> bool {
+    bytes <= a.bytes.saturating_mul(SHARE_UNIT) && calls <= a.draw_calls.saturating_mul(SHARE_UNIT)
 }
 
 impl Planned {
@@ -1666,49 +1854,248 @@ fn matrix_of(t: &Affine3A) -> [f32; 12] {
 }
 
 impl Plan {
-    /// Whether planning again at `eye` with this plan held ([`plan_after`]), on the tree it
-    /// was made on and with the rest of its view, gives this plan: its [`Decisions`] hold
-    /// there and every object keeps its own level of detail (within the hysteresis a held
-    /// level has).
-    pub fn holds_at(&self, tree: &horizon_world::Tree, eye: [f64; 3]) -> bool {
+    /// Carries this plan to `eye` if planning again there with it held ([`plan_after`]), on
+    /// the tree it was made on and with the rest of its view, gives the same cut: its
+    /// [`Decisions`] hold there, the aggregates the planner weighed against their objects
+    /// weigh the same, and every model keeps the level its objects share. The objects' own
+    /// levels (what the next step's hysteresis starts from) become those planning again
+    /// would give, so the plan is then the one planning again makes. False, and the plan
+    /// unchanged, otherwise.
+    ///
+    /// An object's own level matters to the wire only through its model's shared level
+    /// ([`share_levels`]) and the weighing of instances, so with 60,000 objects in a cut
+    /// (instances of a reused world) a small step that moves a few of them across a level
+    /// keeps the cut. Under a byte, draw-call or triangle budget every level counts towards
+    /// where refinement stops, and any change replans.
+    pub fn carry_to(&mut self, tree: &horizon_world::Tree, eye: [f64; 3]) -> bool {
         if !self.decisions.hold_at(tree, eye) {
             return false;
         }
-        let (eye, bvh) = (eye_of(eye), &tree.bvh);
+        let eye = eye_of(eye);
+        if self.consulted_levels_hold(tree, eye) {
+            // Every step of planning again would be this plan's.
+            return true;
+        }
+        match self.levels_at(tree, eye) {
+            Some((chosen, changed)) => {
+                if changed {
+                    self.take_levels(tree, &chosen);
+                }
+                // Planning again would consult these levels; the bands follow them.
+                self.decisions.consulted = consulted(&chosen);
+                self.decisions.bands.clear();
+                true
+            }
+            None => false,
+        }
+    }
+
+    /// Whether every level the plan consulted is the level planning again at `eye` would
+    /// consult: within its [`LevelBand`], or else chosen again and found the same.
+    fn consulted_levels_hold(&mut self, tree: &horizon_world::Tree, eye: Vec3) -> bool {
+        if self.decisions.consulted.is_empty() {
+            return true;
+        }
+        if self.decisions.bands.is_empty() {
+            self.decisions.bands = self.level_bands(tree);
+        }
         let pixel_angle = pixel_angle(&self.view);
-        let levels_hold = self.decisions.levels.iter().all(|&(o, level)| {
-            let Some(r) = bvh.object(o) else {
+        let bvh = &tree.bvh;
+        self.decisions.bands.iter().all(|b| {
+            let d = (b.centre - eye).length() - b.radius;
+            if d > b.lo && d < b.hi {
+                return true;
+            }
+            let Some(r) = bvh.object(b.object) else {
                 return false;
             };
-            let Some(m) = self.models.get(r.model() as usize).and_then(Option::as_ref) else {
-                return level == 0;
-            };
-            let held = Some(level);
-            level_at(m, &r, eye, pixel_angle, self.view.max_pixel_error, held) == level
-        });
-        let (instances, examined) = (&self.decisions.instances, &self.decisions.examined);
-        if !levels_hold || (instances.is_empty() && examined.is_empty()) {
-            return levels_hold;
+            let now = self
+                .models
+                .get(r.model() as usize)
+                .and_then(Option::as_ref)
+                .map_or(0, |m| {
+                    let held = (b.held != UNCHOSEN).then_some(b.held);
+                    level_at(m, &r, eye, pixel_angle, self.view.max_pixel_error, held)
+                });
+            now == b.level
+        })
+    }
+
+    /// The band of every consulted level: its object's own level is held where the object
+    /// is in the cut (as planning again with this plan held anchors it), chosen afresh
+    /// elsewhere.
+    fn level_bands(&self, tree: &horizon_world::Tree) -> Vec<LevelBand> {
+        let bvh = &tree.bvh;
+        let mut held = vec![UNCHOSEN; bvh.object_slots()];
+        for &(o, level) in &self.decisions.levels {
+            if let Some(slot) = held.get_mut(o.0 as usize) {
+                *slot = level;
+            }
         }
-        // Choose levels and weigh every node's instances again as planning with this plan
-        // held would.
-        let held = self.held_levels();
+        let pixel_angle = pixel_angle(&self.view);
+        let max_pixel_error = self.view.max_pixel_error as f32;
+        self.decisions
+            .consulted
+            .iter()
+            .map(|&(o, level)| {
+                let held = held.get(o.0 as usize).copied().unwrap_or(UNCHOSEN);
+                let mut band = LevelBand {
+                    object: o,
+                    centre: Vec3::ZERO,
+                    radius: 0.0,
+                    lo: f32::INFINITY,
+                    hi: f32::NEG_INFINITY,
+                    level,
+                    held,
+                };
+                let Some(r) = bvh.object(o) else {
+                    return band;
+                };
+                let sphere = r.sphere();
+                (band.centre, band.radius) = (sphere.centre, sphere.radius);
+                if let Some(m) = self.models.get(r.model() as usize).and_then(Option::as_ref) {
+                    let scale = horizon_mesh::transform::max_axis_scale(&r.transform());
+                    let anchor = (held != UNCHOSEN).then_some(held);
+                    let (lo, hi) = m.band(level, anchor, scale, pixel_angle, max_pixel_error);
+                    (band.lo, band.hi) = (lo, hi);
+                }
+                band
+            })
+            .collect()
+    }
+
+    /// The objects' own levels planning again at `eye` would choose, by tree id, and whether
+    /// any differs from this plan's; none if planning again would make another cut.
+    fn levels_at(
+        &self,
+        tree: &horizon_world::Tree,
+        eye: Vec3,
+    ) -> Option<(Vec<std::cell::Cell<u8>>, bool)> {
+        let bvh = &tree.bvh;
+        let pixel_angle = pixel_angle(&self.view);
+        let max_pixel_error = self.view.max_pixel_error;
+        // Every level counts under a budget other than entries; otherwise only shared ones.
+        let exact = self.decisions.ordered;
+        let chosen = vec![std::cell::Cell::new(UNCHOSEN); bvh.object_slots()];
+        // The (model, level) pairs whose objects changed: the assets `share_models` found
+        // in the cut may differ in these alone.
+        let mut touched: HashSet<(u64, u8)> = HashSet::new();
+        for &(o, level) in &self.decisions.levels {
+            let r = bvh.object(o)?;
+            let now = self
+                .models
+                .get(r.model() as usize)
+                .and_then(Option::as_ref)
+                .map_or(0, |m| {
+                    level_at(m, &r, eye, pixel_angle, max_pixel_error, Some(level))
+                });
+            if now != level {
+                if exact {
+                    return None;
+                }
+                touched.insert((r.model(), level));
+                touched.insert((r.model(), now));
+            }
+            chosen.get(o.0 as usize)?.set(now);
+        }
+        // Objects outside the cut have no held level: the chooser picks theirs afresh, as
+        // the planner would.
+        let unheld = HashMap::new();
         let chooser = LevelChooser {
             tree,
             models: &self.models,
             eye,
             pixel_angle,
-            max_pixel_error: self.view.max_pixel_error,
-            held: &held,
-            chosen: &[],
+            max_pixel_error,
+            held: &unheld,
+            chosen: &chosen,
         };
-        examined.iter().all(|&(o, level)| chooser.of(o) == level)
-            && instances.iter().all(|&(node, won)| {
-                let asset = self.decisions.nodes.get(node.0 as usize);
-                asset
-                    .and_then(Option::as_ref)
-                    .is_some_and(|a| chooser.instances_win(node, a) == won)
-            })
+        let examined_hold = self.decisions.examined.iter().all(|&(o, level)| {
+            chooser.of(o) == level
+                && (touched.is_empty()
+                    || bvh
+                        .object(o)
+                        .is_some_and(|r| !touched.contains(&(r.model(), level))))
+        });
+        let instances = &self.decisions.instances;
+        let weighed_hold = examined_hold
+            && (instances.is_empty() || {
+                let weighed: HashSet<NodeId> = instances.iter().map(|&(n, _)| n).collect();
+                let now = chooser.instances_win_all(bvh.root(), &weighed, &self.decisions.nodes);
+                instances
+                    .iter()
+                    .all(|&(node, won)| now.get(&node).copied().unwrap_or(false) == won)
+            });
+        if !weighed_hold {
+            return None;
+        }
+        if !touched.is_empty() && !self.shared_levels_hold(tree, &chosen, &touched) {
+            return None;
+        }
+        Some((chosen, !touched.is_empty()))
+    }
+
+    /// Whether every model of `touched` keeps its shared level with its objects' own levels
+    /// at `chosen` ([`share_levels`], this plan's levels held).
+    fn shared_levels_hold(
+        &self,
+        tree: &horizon_world::Tree,
+        chosen: &[std::cell::Cell<u8>],
+        touched: &HashSet<(u64, u8)>,
+    ) -> bool {
+        let models: HashSet<u64> = touched.iter().map(|&(m, _)| m).collect();
+        let mut finest: HashMap<u64, u8> = HashMap::new();
+        for &(o, _) in &self.decisions.levels {
+            let Some(model) = tree.bvh.object(o).map(|r| r.model()) else {
+                return false;
+            };
+            if models.contains(&model) {
+                let now = chosen.get(o.0 as usize).map_or(0, std::cell::Cell::get);
+                let f = finest.entry(model).or_insert(now);
+                *f = (*f).min(now);
+            }
+        }
+        let held = self.model_levels();
+        finest.iter().all(|(model, &f)| {
+            held.get(model)
+                .is_some_and(|&h| shared_level(f, Some(h)) == h)
+        })
+    }
+
+    /// Takes the objects' own levels at `chosen` (tree ids) into the plan.
+    fn take_levels(&mut self, tree: &horizon_world::Tree, chosen: &[std::cell::Cell<u8>]) {
+        let now = |o: ObjectId| {
+            chosen
+                .get(o.0 as usize)
+                .map(std::cell::Cell::get)
+                .filter(|&l| l != UNCHOSEN)
+        };
+        for (o, level) in &mut self.decisions.levels {
+            if let Some(l) = now(*o) {
+                *level = l;
+            }
+        }
+        for p in &mut self.items {
+            match (&mut p.what, p.key) {
+                (Drawn::Object { needed, .. }, Key::Object { object, .. }) => {
+                    if let Some(l) = tree.tree_id(object).and_then(now) {
+                        *needed = l;
+                    }
+                }
+                (Drawn::Instances(instances), _)
+                    if instances
+                        .iter()
+                        .any(|i| now(i.tree).is_some_and(|l| l != i.needed)) =>
+                {
+                    for i in instances_mut(instances) {
+                        if let Some(l) = now(i.tree) {
+                            i.needed = l;
+                        }
+                    }
+                }
+                _ => {}
+            }
+        }
     }
 
     /// The wire entries, largest solid angle first (ties by id).
@@ -2218,6 +2605,72 @@ mod tests {
             seen.len(),
             m.levels.len(),
             "every level is chosen somewhere"
+        );
+    }
+
+    #[test]
+    fn inside_its_band_a_level_is_what_choose_gives_and_bands_cover_almost_every_distance() {
+        let m = chain();
+        let mut rng = horizon_mesh::rng::Rng::new(5);
+        let (mut inside, mut counted, mut samples) = (0, 0, 0);
+        for _ in 0..20_000 {
+            let d = 0.01 * 1e6f32.powf(rng.unit_f64() as f32) - 0.005;
+            let scale = 0.25 * 16f32.powf(rng.unit_f64() as f32);
+            let error = [1.0, 0.5, 3.0, 0.0][samples % 4];
+            samples += 1;
+            let held = match samples % 3 {
+                0 => None,
+                _ => Some(m.choose(d * 1.1, scale, PIXEL, error, None)),
+            };
+            let level = m.choose(d, scale, PIXEL, error, held);
+            let (lo, hi) = m.band(level, held, scale, PIXEL, error);
+            // Every distance above 0 where the level chosen is the one held (or none is) lies
+            // in its band, but for a sliver at the band's edges.
+            if d > 0.0 && held.is_none_or(|h| h == level) {
+                counted += 1;
+                if d > lo && d < hi {
+                    inside += 1;
+                }
+            }
+            // Wherever a band says a level, `choose` gives it: probe the band's inside.
+            for k in 0..8 {
+                if lo >= hi {
+                    break;
+                }
+                let t = (k as f32 + 0.5) / 8.0;
+                let probe = if hi.is_finite() && lo.is_finite() {
+                    lo + (hi - lo) * t
+                } else if lo.is_finite() {
+                    lo * (1.0 + 10.0 * t) + t
+                } else {
+                    hi.min(1e4) * t - (1.0 - t)
+                };
+                if probe > lo && probe < hi {
+                    assert_eq!(
+                        m.choose(probe, scale, PIXEL, error, held),
+                        level,
+                        "band ({lo}, {hi}) of level {level} held {held:?} at {probe}"
+                    );
+                }
+            }
+            // Near the edges too, where rounding would show.
+            for edge in [lo, hi] {
+                if edge.is_finite() {
+                    for probe in [edge * (1.0 + 1e-6), edge * (1.0 - 1e-6)] {
+                        if probe > lo && probe < hi {
+                            assert_eq!(m.choose(probe, scale, PIXEL, error, held), level);
+                        }
+                    }
+                }
+            }
+            // A level other than the one held has no band: it is chosen again.
+            if held.is_some_and(|h| h != level) {
+                assert!(lo >= hi, "level {level} held {held:?}: ({lo}, {hi})");
+            }
+        }
+        assert!(
+            inside * 1000 > counted * 998,
+            "{inside} of {counted} distances inside their level's band"
         );
     }
 

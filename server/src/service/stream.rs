@@ -412,9 +412,9 @@ async fn write(
             continue;
         };
         shared.planned.store(view_id, Ordering::SeqCst);
-        // With the world and the rest of the view as they were, a plan whose decisions hold
-        // at the new eye is the plan planning again would make: nothing to send.
-        if let (false, false, Some(h)) = (reset, world_changed, &held) {
+        // With the world and the rest of the view as they were, a plan that carries to the
+        // new eye is the plan planning again would make: nothing to send.
+        if let (false, false, Some(h)) = (reset, world_changed, &mut held) {
             let same_rest = View {
                 eye: view.eye,
                 ..h.view
@@ -425,7 +425,7 @@ async fn write(
                     .with_served(|served| {
                         served.tree.generation == h.generation
                             && served.published == h.published
-                            && h.holds_at(served.tree, view.eye)
+                            && h.carry_to(served.tree, view.eye)
                     })
                     .unwrap_or(false);
             if holds {
