@@ -123,6 +123,10 @@ enum Command {
         /// Asset downloads at once.
         #[arg(long, default_value_t = 4)]
         concurrency: usize,
+        /// Fetch assets in the order their entries arrive, instead of every preview first
+        /// and then the entries largest on screen first.
+        #[arg(long)]
+        in_order: bool,
         #[command(flatten)]
         view: ViewArgs,
         /// Print the report as JSON.
@@ -235,6 +239,7 @@ async fn run(cli: Cli) -> anyhow::Result<()> {
             duration,
             cache,
             concurrency,
+            in_order,
             view,
             json,
         } => {
@@ -252,6 +257,7 @@ async fn run(cli: Cli) -> anyhow::Result<()> {
                 bandwidth,
                 duration: Duration::from_secs_f64(duration),
                 concurrency,
+                in_order,
                 ..WalkOptions::new(waypoints)
             };
             walk_command(&url, &options, cache, json).await
@@ -477,6 +483,7 @@ async fn walk_command(
         return out(&serde_json::to_string(&report)?);
     }
     let l = &report.view_latency_ms;
+    let ms = |t: Option<f64>| t.map_or("never".to_owned(), |ms| format!("{ms:.0} ms"));
     out(&format!(
         "walked {:.1} m in {:.1} s: {} views, {} resets, {} deltas (+{} -{} entries)",
         report.distance,
@@ -501,22 +508,27 @@ async fn walk_command(
     out(&format!(
         "view loaded: p50 {:.0} ms, p99 {:.0} ms, max {:.0} ms over {} answered views \
          ({} not loaded at the end; {} views without a message of their own); \
-         first complete view {}",
+         first complete view {}, first view with every entry drawn {}",
         l.p50,
         l.p99,
         l.max,
         l.count,
         report.views_unloaded,
         report.views_unanswered,
-        report
-            .first_complete_ms
-            .map_or("never".to_owned(), |ms| format!("{ms:.0} ms"))
+        ms(report.first_complete_ms),
+        ms(report.first_drawn_ms)
     ))?;
     out(&format!(
-        "frames with a drawn entry missing: {} of {} ({:.1}%); {} entries at generation {}",
+        "frames with a drawn entry missing: {} of {} ({:.1}%), with an entry not drawn at all \
+         {} ({:.1}%); drawn on average: {:.1}% of the entries, {:.1}% of what they cover on \
+         screen; {} entries at generation {}",
         report.incomplete_frames,
         report.frames,
         report.incomplete_share * 100.0,
+        report.hole_frames,
+        report.hole_share * 100.0,
+        report.drawn_entries_share * 100.0,
+        report.drawn_screen_share * 100.0,
         report.final_entries,
         report.final_generation
     ))

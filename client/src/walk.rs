@@ -3,15 +3,21 @@
 //! the kept cut counts every object exactly once after each), and fetches the assets its cut
 //! needs through the [`AssetCache`], a few at a time and, if asked, within a bandwidth. It
 //! reports what that cost and what a viewer would have seen: how long each view took until
-//! every asset of the cut that answered it was loaded, and the share of frames in which an
-//! entry of the cut had an asset still missing.
+//! every asset of the cut that answered it was loaded, the share of frames in which an entry
+//! of the cut had an asset still missing, and the share in which one had nothing to draw.
+//!
+//! Fetching is progressive, as the web viewer's (issue 28): every entry's `preview` (its
+//! model's coarsest level, drawn until its own level has loaded) comes first, then the
+//! entries' own assets, largest on screen first (radius² / distance² from the eye last
+//! sent). [`WalkOptions::in_order`] fetches in the order the entries arrived instead, the
+//! peer the progressive order is measured against.
 
 use std::collections::{BTreeMap, HashMap, HashSet, VecDeque};
 use std::time::{Duration, Instant};
 
 use futures_util::stream::FuturesUnordered;
 use futures_util::StreamExt;
-use horizon_protocol::{ErrorCode, ServerMessage, View};
+use horizon_protocol::{AssetRole, ErrorCode, ServerMessage, View};
 use serde::Serialize;
 
 use crate::assets::{AssetCache, AssetError, Fetched, TokenBucket};
@@ -53,6 +59,7 @@ pub async fn walk(
 
     let mut stream = Stream::connect(base_url).await?;
     let mut walker = Walker::new(Instant::now(), options.concurrency.max(1));
+    walker.in_order = options.in_order;
     let deadline = tokio::time::Instant::from_std(walker.start + options.duration);
     let mut ticker = tokio::time::interval(interval);
     ticker.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
@@ -68,6 +75,7 @@ pub async fn walk(
                 let mut view = template;
                 view.eye = path.walked(options.speed * elapsed);
                 stream.send_view(next_view, &view).await?;
+                walker.eye = view.eye;
                 walker.sent.insert(next_view, Instant::now());
                 walker.report.views_sent += 1;
                 walker.report.distance = options.speed * elapsed;
@@ -112,11 +120,14 @@ pub struct WalkOptions {
     pub concurrency: usize,
     /// Time between views, which is also a frame. Default 100 ms.
     pub interval: Duration,
+    /// Fetch assets in the order their entries arrived, previews as any other asset, instead
+    /// of previews first and then largest on screen first.
+    pub in_order: bool,
 }
 
 impl WalkOptions {
     /// A walk along `path` at 1.5 m/s for 30 s with the default view, no bandwidth limit,
-    /// 4 downloads at once and a view every 100 ms.
+    /// 4 downloads at once, a view every 100 ms, and progressive fetching.
     pub fn new(path: Vec<[f64; 3]>) -> Self {
         Self {
             path,
@@ -126,6 +137,7 @@ impl WalkOptions {
             view: View::at([0.0, 0.0, 0.0]),
             concurrency: 4,
             interval: Duration::from_millis(100),
+            in_order: false,
         }
     }
 }
@@ -178,12 +190,25 @@ pub struct WalkReport {
     pub view_latency_ms: Latencies,
     /// From the start until the first cut was loaded whole.
     pub first_complete_ms: Option<f64>,
+    /// From the start until every entry of the cut first had something to draw: its own
+    /// assets, or its preview.
+    pub first_drawn_ms: Option<f64>,
     /// Frames since the first cut arrived.
     pub frames: u64,
     /// Frames in which an entry of the cut had an asset still missing.
     pub incomplete_frames: u64,
     /// `incomplete_frames / frames` (0 without frames).
     pub incomplete_share: f64,
+    /// Frames in which an entry of the cut had nothing to draw: an asset of its own missing,
+    /// and no preview loaded.
+    pub hole_frames: u64,
+    /// `hole_frames / frames` (0 without frames).
+    pub hole_share: f64,
+    /// The share of the cut's entries that had something to draw, averaged over frames.
+    pub drawn_entries_share: f64,
+    /// The same, each entry weighed by how large it looks (its radius² / distance² from
+    /// the eye, at most 1): the share of what the cut shows that was drawn.
+    pub drawn_screen_share: f64,
     /// Entries of the cut at the end.
     pub final_entries: usize,
     /// The cut's generation at the end.
@@ -294,6 +319,19 @@ impl Polyline {
     }
 }
 
+/// How large an entry looks from `eye`: its radius² / distance², at most 1.
+fn screen_size(e: &horizon_protocol::Entry, eye: [f64; 3]) -> f64 {
+    let d2: f64 = (0..3)
+        .map(|k| (f64::from(e.center[k]) - eye[k]).powi(2))
+        .sum();
+    let r2 = f64::from(e.radius).powi(2);
+    if r2 >= d2 {
+        1.0
+    } else {
+        r2 / d2
+    }
+}
+
 fn distance(a: [f64; 3], b: [f64; 3]) -> f64 {
     ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
 }
@@ -366,9 +404,13 @@ struct Walker {
     loaded: HashSet<String>,
     /// Assets being downloaded.
     inflight: HashSet<String>,
-    /// Assets to download, in the order their entries arrived.
+    /// Assets to download, in the order their entries arrived (with `in_order`).
     queue: VecDeque<String>,
     queued: HashSet<String>,
+    /// Fetch in arrival order rather than previews, then largest on screen, first.
+    in_order: bool,
+    /// The eye of the last view sent.
+    eye: [f64; 3],
     /// Every asset the cut needs.
     needed: HashSet<String>,
     /// The kind of entry that first asked for each asset queued, for the report's split.
@@ -395,6 +437,8 @@ impl Walker {
             inflight: HashSet::new(),
             queue: VecDeque::new(),
             queued: HashSet::new(),
+            in_order: false,
+            eye: [0.0; 3],
             needed: HashSet::new(),
             kinds: HashMap::new(),
             missing: 0,
@@ -408,12 +452,51 @@ impl Walker {
 
     /// One frame: complete or not, once a cut has arrived.
     fn frame(&mut self) {
-        if self.cut.started() {
-            self.report.frames += 1;
-            if self.missing > 0 {
-                self.report.incomplete_frames += 1;
+        if !self.cut.started() {
+            return;
+        }
+        self.report.frames += 1;
+        let (mut entries, mut screen) = (1.0, 1.0);
+        if self.missing > 0 {
+            self.report.incomplete_frames += 1;
+            (entries, screen) = self.drawn_shares();
+            if entries < 1.0 {
+                self.report.hole_frames += 1;
             }
         }
+        // Sums over frames until `finish` divides them.
+        self.report.drawn_entries_share += entries;
+        self.report.drawn_screen_share += screen;
+    }
+
+    /// Whether an entry has something to draw: its own assets, or its preview.
+    fn entry_drawn(&self, e: &horizon_protocol::Entry) -> bool {
+        let loaded = |a: &&horizon_protocol::Asset| self.loaded.contains(&a.hash);
+        let preview = |a: &&horizon_protocol::Asset| a.role == AssetRole::Preview;
+        e.assets.iter().filter(|a| !preview(a)).all(|a| loaded(&a))
+            || e.assets.iter().filter(preview).any(|a| loaded(&a))
+    }
+
+    /// Whether every entry of the cut has something to draw.
+    fn drawn(&self) -> bool {
+        self.cut.entries().values().all(|e| self.entry_drawn(e))
+    }
+
+    /// The share of the cut's entries that have something to draw, by count and by how large
+    /// they look from the last eye.
+    fn drawn_shares(&self) -> (f64, f64) {
+        let (mut n, mut drawn, mut size, mut drawn_size) = (0usize, 0usize, 0.0, 0.0);
+        for e in self.cut.entries().values() {
+            let s = screen_size(e, self.eye);
+            n += 1;
+            size += s;
+            if self.entry_drawn(e) {
+                drawn += 1;
+                drawn_size += s;
+            }
+        }
+        let share = |a: f64, b: f64| if b > 0.0 { a / b } else { 1.0 };
+        (share(drawn as f64, n as f64), share(drawn_size, size))
     }
 
     /// Applies a server message, checks the cut, and queues the assets it brought.
@@ -458,11 +541,14 @@ impl Walker {
         for entry in arrived {
             for asset in &entry.assets {
                 let h = &asset.hash;
-                if !self.loaded.contains(h)
+                if self.in_order
+                    && !self.loaded.contains(h)
                     && !self.inflight.contains(h)
                     && self.queued.insert(h.clone())
                 {
                     self.queue.push_back(h.clone());
+                }
+                if !self.loaded.contains(h) {
                     self.kinds.entry(h.clone()).or_insert(entry.kind);
                 }
             }
@@ -524,8 +610,15 @@ impl Walker {
         }
     }
 
-    /// The next asset to download: the oldest queued that the cut still needs.
+    /// The next asset to download: with `in_order`, the oldest queued that the cut still
+    /// needs; otherwise a preview the cut needs first, then the asset of the entry largest
+    /// on screen from the last eye (ties by hash, so that a walk is repeatable).
     fn next_fetch(&mut self) -> Option<String> {
+        if !self.in_order {
+            let hash = self.most_wanted()?;
+            self.inflight.insert(hash.clone());
+            return Some(hash);
+        }
         while let Some(hash) = self.queue.pop_front() {
             self.queued.remove(&hash);
             if self.needed.contains(&hash)
@@ -538,9 +631,37 @@ impl Walker {
         None
     }
 
+    /// The asset the progressive order fetches next, if any is still wanted.
+    fn most_wanted(&self) -> Option<String> {
+        let mut best: Option<((bool, f64), &str)> = None;
+        for e in self.cut.entries().values() {
+            let screen = screen_size(e, self.eye);
+            for a in &e.assets {
+                if self.loaded.contains(&a.hash) || self.inflight.contains(&a.hash) {
+                    continue;
+                }
+                let rank = (a.role == AssetRole::Preview, screen);
+                let better = best.is_none_or(|(b, h)| {
+                    rank.0 != b.0 && rank.0
+                        || rank.0 == b.0 && (rank.1 > b.1 || rank.1 == b.1 && a.hash.as_str() < h)
+                });
+                if better {
+                    best = Some((rank, &a.hash));
+                }
+            }
+        }
+        best.map(|(_, h)| h.to_owned())
+    }
+
     /// When every asset of the cut is loaded, the views awaiting it are loaded.
     fn settle(&mut self) {
-        if !self.cut.started() || self.missing > 0 {
+        if !self.cut.started() {
+            return;
+        }
+        if self.report.first_drawn_ms.is_none() && (self.missing == 0 || self.drawn()) {
+            self.report.first_drawn_ms = Some(self.start.elapsed().as_secs_f64() * 1e3);
+        }
+        if self.missing > 0 {
             return;
         }
         let now = Instant::now();
@@ -560,11 +681,19 @@ impl Walker {
         r.views_unloaded = self.awaiting.len() as u64;
         r.views_unanswered = self.unanswered + self.sent.len() as u64;
         r.view_latency_ms = Latencies::of(&self.latencies);
-        r.incomplete_share = if r.frames > 0 {
-            r.incomplete_frames as f64 / r.frames as f64
-        } else {
-            0.0
+        let share = |n: u64| {
+            if r.frames > 0 {
+                n as f64 / r.frames as f64
+            } else {
+                0.0
+            }
         };
+        r.incomplete_share = share(r.incomplete_frames);
+        r.hole_share = share(r.hole_frames);
+        if r.frames > 0 {
+            r.drawn_entries_share /= r.frames as f64;
+            r.drawn_screen_share /= r.frames as f64;
+        }
         r.final_entries = self.cut.len();
         r.final_generation = self.cut.generation();
         r
@@ -574,6 +703,7 @@ impl Walker {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use horizon_protocol::Entry;
 
     #[test]
     fn the_polyline_interpolates_by_distance() {
@@ -606,6 +736,100 @@ mod tests {
         assert_eq!(repeated.at(0.0), [1.0, 0.0, 0.0]);
         assert!(Polyline::new(&[]).is_err());
         assert!(Polyline::new(&[[0.0, f64::NAN, 0.0]]).is_err());
+    }
+
+    /// An object entry at `x` on the x axis of `radius`, with its own asset and maybe a
+    /// preview.
+    fn entry(id: &str, x: f32, radius: f32, own: &str, preview: Option<&str>) -> Entry {
+        let asset = |hash: &str, role| horizon_protocol::Asset {
+            hash: hash.to_owned(),
+            bytes: 100,
+            role,
+        };
+        let mut assets = vec![asset(own, AssetRole::Model)];
+        assets.extend(preview.map(|p| asset(p, AssetRole::Preview)));
+        Entry {
+            id: id.to_owned(),
+            kind: horizon_protocol::EntryKind::Object,
+            assets,
+            placements: Vec::new(),
+            level: 0,
+            pending: false,
+            bytes: 100,
+            triangles: 12,
+            draw_calls: 1,
+            center: [x, 0.0, 0.0],
+            radius,
+            covers: 1,
+            impostor: None,
+        }
+    }
+
+    fn walker_with(in_order: bool, entries: Vec<Entry>) -> Walker {
+        let mut w = Walker::new(Instant::now(), 1);
+        w.in_order = in_order;
+        let reset = ServerMessage::Reset {
+            seq: 1,
+            view: 1,
+            generation: 1,
+            published: 1,
+            objects: entries.len() as u64,
+            entries,
+            stopped_by: None,
+        };
+        w.message(&reset).expect("the reset applies");
+        w
+    }
+
+    fn fetch_all(w: &mut Walker) -> Vec<String> {
+        let mut order = Vec::new();
+        while let Some(hash) = w.next_fetch() {
+            order.push(hash.clone());
+            let fetched = Fetched {
+                bytes: Vec::new(),
+                fetched: true,
+                downloaded: 100,
+            };
+            w.fetched(hash, Ok(fetched)).expect("recorded");
+            w.frame();
+        }
+        order
+    }
+
+    #[test]
+    fn previews_come_first_then_the_largest_on_screen_and_a_preview_draws_its_entry() {
+        let entries = || {
+            vec![
+                // Far and small, with a preview; near and large; mid-way.
+                entry("o:1@1/1", 500.0, 5.0, "far", Some("far-preview")),
+                entry("o:2@1", 10.0, 2.0, "near", None),
+                entry("o:3@1", 100.0, 4.0, "mid", None),
+            ]
+        };
+        let mut w = walker_with(false, entries());
+        assert!(!w.drawn(), "nothing loaded, nothing drawn");
+        assert_eq!(fetch_all(&mut w), ["far-preview", "near", "mid", "far"]);
+        assert!(w.drawn());
+        let r = w.finish();
+        // After the preview and two fetches every entry could be drawn, but the far one
+        // was at its preview: the frames in between are incomplete, not holes.
+        assert_eq!((r.frames, r.incomplete_frames, r.hole_frames), (4, 3, 2));
+        assert!(r.first_drawn_ms <= r.first_complete_ms);
+        // Drawn after each fetch: a third, two thirds, all, all.
+        assert!((r.drawn_entries_share - 0.75).abs() < 1e-9, "{r:?}");
+
+        // In order: as the entries listed their assets. The near entry, most of the screen,
+        // comes third.
+        let mut w = walker_with(true, entries());
+        let order = fetch_all(&mut w);
+        assert_eq!(order.len(), 4);
+        assert_eq!(order.iter().filter(|h| h.contains("preview")).count(), 1);
+        let in_order = w.finish();
+        assert!(in_order.hole_frames <= in_order.incomplete_frames);
+        assert!(
+            r.drawn_screen_share > in_order.drawn_screen_share + 0.1,
+            "{r:?} {in_order:?}"
+        );
     }
 
     #[test]

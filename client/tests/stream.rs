@@ -432,6 +432,14 @@ async fn a_walk_loads_its_cut_within_the_bandwidth_and_the_cache_revalidates() {
     assert!(report.first_complete_ms.is_some(), "{report:?}");
     assert!(report.view_latency_ms.count > 0, "{report:?}");
     assert!(report.incomplete_frames <= report.frames, "{report:?}");
+    // An entry with nothing to draw is missing an asset; every entry drawn comes no later
+    // than every asset loaded.
+    assert!(report.hole_frames <= report.incomplete_frames, "{report:?}");
+    assert!(report.first_drawn_ms.is_some(), "{report:?}");
+    assert!(
+        report.first_drawn_ms <= report.first_complete_ms,
+        "{report:?}"
+    );
     // The bucket never lets more through than its burst and its rate.
     let burst = (bandwidth * 0.1).max(16_384.0);
     assert!(

@@ -469,3 +469,96 @@ async fn a_plan_carried_to_a_new_eye_is_the_plan_planning_again_makes() {
         "carried {carried} ({relevelled} with new levels), missed {missed}, changed {changed}"
     );
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_plan_at_the_edge_of_a_budget_is_never_carried_into_another_cut() {
+    let (_dir, world) = world("edge");
+    let state = state(&world);
+    let keys = |p: &Plan| -> Vec<Key> {
+        let mut k: Vec<Key> = p.items.iter().map(|p| p.key).collect();
+        k.sort();
+        k
+    };
+    let check = |held: &Plan, view: &View| -> bool {
+        let again = state.plan_after(view, Some(held)).unwrap();
+        let mut moved = held.clone();
+        let carries = world
+            .with_served(|served| moved.carry_to(served.tree, view.eye))
+            .unwrap();
+        if carries {
+            assert_eq!(drawn(&moved), drawn(&again), "carried at {:?}", view.eye);
+            assert_eq!(moved.stopped_by, again.stopped_by);
+        }
+        carries
+    };
+    // A step that changes only the level of an object charged for the refinement the byte
+    // budget refused: the refusal's totals change, and so does the cut.
+    let mut view = View::at([
+        -50.551_721_177_376_14,
+        39.644_614_594_724_565,
+        10.606_241_231_824_129,
+    ]);
+    view.min_solid_angle = 1e-6;
+    view.instances = false;
+    view.budgets.max_bytes = Some(1_127_903);
+    let held = state.plan(&view).unwrap();
+    view.eye = [
+        -41.691_671_350_926_754,
+        33.339_533_335_938_02,
+        8.454_204_118_019_058,
+    ];
+    check(&held, &view);
+    // Budgets found, by bisection, where one more unit changes the cut; small steps from
+    // there, with and without instances, under bytes and triangles.
+    let mut rng = horizon_mesh::rng::Rng::new(777);
+    let (mut carried, mut steps) = (0, 0);
+    for walk in 0..24 {
+        let mut start = View::at([
+            -100.0 + 600.0 * rng.unit_f64(),
+            2.0 + 40.0 * rng.unit_f64(),
+            -60.0 + 200.0 * rng.unit_f64(),
+        ]);
+        start.min_solid_angle = [1e-4, 1e-5, 1e-6][walk % 3];
+        start.instances = (walk / 3) % 2 == 0;
+        let triangles = (walk / 6) % 2 == 0;
+        let with = |v: &View, b: u64| {
+            let mut v = *v;
+            if triangles {
+                v.budgets.max_triangles = Some(b);
+            } else {
+                v.budgets.max_bytes = Some(b);
+            }
+            v
+        };
+        let b0 = (if triangles { 2e3 } else { 2e4 } * 10f64.powf(3.0 * rng.unit_f64())) as u64;
+        let base = keys(&state.plan(&with(&start, b0)).unwrap());
+        let (mut lo, mut hi) = (b0, b0 * 8);
+        if keys(&state.plan(&with(&start, hi)).unwrap()) == base {
+            continue;
+        }
+        while hi - lo > 1 {
+            let mid = (lo + hi) / 2;
+            if keys(&state.plan(&with(&start, mid)).unwrap()) == base {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        let start = with(&start, lo);
+        let held = state.plan(&start).unwrap();
+        for _ in 0..12 {
+            let mut v = start;
+            let dir = rng.unit_vector();
+            let step = 0.05 * 400f64.powf(rng.unit_f64());
+            for i in 0..3 {
+                v.eye[i] += f64::from(dir[i]) * step;
+            }
+            v.eye[1] = v.eye[1].max(1.0);
+            steps += 1;
+            if check(&held, &v) {
+                carried += 1;
+            }
+        }
+    }
+    assert!(carried > 10 && steps > 100, "carried {carried} of {steps}");
+}

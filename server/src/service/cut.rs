@@ -146,7 +146,9 @@ pub struct Decisions {
     /// refinement made decides what it switches.
     examined: Vec<(ObjectId, u8)>,
     /// Every object whose level the plan consulted, with that level: planning again, with
-    /// the same node decisions and these levels, takes every step the same way.
+    /// the same node decisions and these levels, takes every step the same way. After
+    /// [`Plan::carry_to`] took new levels (never under a byte, draw-call or triangle budget),
+    /// every level it looked at, a superset of those planning again consults.
     consulted: Vec<(ObjectId, u8)>,
     /// Where each consulted level stays as it is, made at the first [`Plan::carry_to`]
     /// (empty before, and again once levels change).
@@ -1693,7 +1695,7 @@ impl LevelChooser<'_> {
     /// in the table cannot be drawn as instances.
     fn instances_win(&self, node: NodeId, a: &NodeAsset) -> bool {
         let bvh = &self.tree.bvh;
-        let (mut bytes, mut calls) = (0u64, 0u64);
+        let (mut bytes, mut calls) = (0u128, 0u128);
         let mut stack = vec![node];
         while let Some(n) = stack.pop() {
             let Some(r) = bvh.node(n) else {
@@ -1719,7 +1721,7 @@ impl LevelChooser<'_> {
 
     /// What one placement of `o` owes of its model level's bytes and draw calls ([`share`]);
     /// none when its model is not in the table.
-    fn placement_share(&self, o: ObjectId) -> Option<(u64, u64)> {
+    fn placement_share(&self, o: ObjectId) -> Option<(u128, u128)> {
         let model = self.tree.bvh.object(o)?.model();
         let m = self.models.get(model as usize).and_then(Option::as_ref)?;
         let l = m.level(self.of(o));
@@ -1738,7 +1740,7 @@ impl LevelChooser<'_> {
         nodes: &NodeAssets,
     ) -> HashMap<NodeId, bool> {
         // A node's total, or none where an object under it cannot be weighed.
-        let mut totals: HashMap<NodeId, Option<(u64, u64)>> = HashMap::new();
+        let mut totals: HashMap<NodeId, Option<(u128, u128)>> = HashMap::new();
         let mut out = HashMap::new();
         let bvh = &self.tree.bvh;
         // Post-order: a node is pushed again (`true`) after its children.
@@ -1749,7 +1751,7 @@ impl LevelChooser<'_> {
                 continue;
             };
             let total = if r.is_leaf() {
-                r.objects().try_fold((0u64, 0u64), |(b, c), o| {
+                r.objects().try_fold((0u128, 0u128), |(b, c), o| {
                     let (pb, pc) = self.placement_share(o)?;
                     Some((b.saturating_add(pb), c.saturating_add(pc)))
                 })
@@ -1758,7 +1760,7 @@ impl LevelChooser<'_> {
                 stack.extend(r.child_nodes().map(|c| (c, false)));
                 continue;
             } else {
-                r.child_nodes().try_fold((0u64, 0u64), |(b, c), child| {
+                r.child_nodes().try_fold((0u128, 0u128), |(b, c), child| {
                     let (cb, cc) = totals.get(&child).copied().flatten()?;
                     Some((b.saturating_add(cb), c.saturating_add(cc)))
                 })
@@ -1775,18 +1777,19 @@ impl LevelChooser<'_> {
 }
 
 /// Units of a placement's share of a byte or a draw call: shares are whole units so that
-/// their sums do not depend on the order they are taken in.
-const SHARE_UNIT: u64 = 1 << 10;
+/// their sums do not depend on the order they are taken in, and fine enough (2^-32) that a
+/// model's draw call shared by a billion placements still counts.
+const SHARE_UNIT: u128 = 1 << 32;
 
 /// One placement's share of `value` (a model level's bytes or draw calls) when `uses`
 /// placements share the model, in [`SHARE_UNIT`]s.
-fn share(value: u64, uses: u32) -> u64 {
-    value.saturating_mul(SHARE_UNIT) / u64::from(uses.max(1))
+fn share(value: u64, uses: u32) -> u128 {
+    u128::from(value) * SHARE_UNIT / u128::from(uses.max(1))
 }
 
 /// Whether placements' shares `(bytes, draw_calls)` cost at most aggregate `a`.
-fn fits(a: &NodeAsset, (bytes, calls): (u64, u64)) -> bool {
-    bytes <= a.bytes.saturating_mul(SHARE_UNIT) && calls <= a.draw_calls.saturating_mul(SHARE_UNIT)
+fn fits(a: &NodeAsset, (bytes, calls): (u128, u128)) -> bool {
+    bytes <= u128::from(a.bytes) * SHARE_UNIT && calls <= u128::from(a.draw_calls) * SHARE_UNIT
 }
 
 impl Planned {
@@ -1859,8 +1862,8 @@ impl Plan {
     /// [`Decisions`] hold there, the aggregates the planner weighed against their objects
     /// weigh the same, and every model keeps the level its objects share. The objects' own
     /// levels (what the next step's hysteresis starts from) become those planning again
-    /// would give, so the plan is then the one planning again makes. False, and the plan
-    /// unchanged, otherwise.
+    /// would give, so the plan is then the one planning again makes. False otherwise, and the
+    /// plan draws the same (its level bands may have been worked out).
     ///
     /// An object's own level matters to the wire only through its model's shared level
     /// ([`share_levels`]) and the weighing of instances, so with 60,000 objects in a cut
@@ -1875,6 +1878,11 @@ impl Plan {
         if self.consulted_levels_hold(tree, eye) {
             // Every step of planning again would be this plan's.
             return true;
+        }
+        if self.decisions.ordered {
+            // Some level changed, and under a byte, draw-call or triangle budget any level
+            // may move where refinement stops (also one charged for the refusal alone).
+            return false;
         }
         match self.levels_at(tree, eye) {
             Some((chosen, changed)) => {
@@ -1965,7 +1973,9 @@ impl Plan {
     }
 
     /// The objects' own levels planning again at `eye` would choose, by tree id, and whether
-    /// any differs from this plan's; none if planning again would make another cut.
+    /// any differs from this plan's; none if planning again would make another cut. Only
+    /// without a byte, draw-call or triangle budget, where levels reach the wire through
+    /// shared levels, the weighing of instances and `share_models` alone.
     fn levels_at(
         &self,
         tree: &horizon_world::Tree,
@@ -1974,8 +1984,6 @@ impl Plan {
         let bvh = &tree.bvh;
         let pixel_angle = pixel_angle(&self.view);
         let max_pixel_error = self.view.max_pixel_error;
-        // Every level counts under a budget other than entries; otherwise only shared ones.
-        let exact = self.decisions.ordered;
         let chosen = vec![std::cell::Cell::new(UNCHOSEN); bvh.object_slots()];
         // The (model, level) pairs whose objects changed: the assets `share_models` found
         // in the cut may differ in these alone.
@@ -1990,9 +1998,6 @@ impl Plan {
                     level_at(m, &r, eye, pixel_angle, max_pixel_error, Some(level))
                 });
             if now != level {
-                if exact {
-                    return None;
-                }
                 touched.insert((r.model(), level));
                 touched.insert((r.model(), now));
             }
