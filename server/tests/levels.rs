@@ -405,6 +405,7 @@ async fn a_plan_carried_to_a_new_eye_is_the_plan_planning_again_makes() {
     let mut rng = horizon_mesh::rng::Rng::new(11);
     // Walks along the row, instances on and off, under each kind of budget.
     let (mut carried, mut relevelled, mut missed, mut changed) = (0, 0, 0, 0);
+    let mut swapped = 0;
     for walk in 0..16 {
         let mut view = View::at([
             -100.0 + 600.0 * rng.unit_f64(),
@@ -440,6 +441,13 @@ async fn a_plan_carried_to_a_new_eye_is_the_plan_planning_again_makes() {
                     "walk {walk}: carried, not the same"
                 );
                 assert_eq!(moved.stopped_by, again.stopped_by);
+                // The node the budget refuses is planning again's too, also where another
+                // grew past the one refused before.
+                let refused = moved.decisions.refused();
+                assert_eq!(refused, again.decisions.refused(), "walk {walk}");
+                if refused != held.decisions.refused() {
+                    swapped += 1;
+                }
                 carried += 1;
                 if drawn(&moved) != drawn(&held) {
                     relevelled += 1;
@@ -461,13 +469,15 @@ async fn a_plan_carried_to_a_new_eye_is_the_plan_planning_again_makes() {
     }
     // Carrying happens, also where objects' own levels move under a kept cut, and a cut
     // that changes is never carried (asserted above); most unchanged cuts are carried.
+    let counts = format!(
+        "carried {carried} ({relevelled} with new levels, {swapped} refusing another node), \
+         missed {missed}, changed {changed}"
+    );
     assert!(
-        carried > 100 && relevelled > 3 && changed > 10,
-        "carried {carried} ({relevelled} with new levels), missed {missed}, changed {changed}"
+        carried > 100 && relevelled > 3 && swapped > 0 && changed > 10,
+        "{counts}"
     );
-    eprintln!(
-        "carried {carried} ({relevelled} with new levels), missed {missed}, changed {changed}"
-    );
+    eprintln!("{counts}");
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

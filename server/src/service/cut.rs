@@ -134,6 +134,10 @@ pub struct Decisions {
     /// A byte, draw-call or triangle budget: totals are not monotone along refinement, so
     /// the order of the refined nodes matters too.
     ordered: bool,
+    /// The entries refinement ended with, and the entry budget: whether another node's
+    /// refinement would be refused too.
+    entries: u64,
+    max_entries: Option<u64>,
     /// Each pending object, and whether it subtended `min_solid_angle`.
     pending: Vec<(ObjectId, bool)>,
     /// Each object's own level of detail, of object entries and instances (before models
@@ -168,6 +172,16 @@ impl Decisions {
     /// `min_solid_angle`. Ties count as changes (the planner breaks them by node id), so
     /// "true" is exact: it evaluates the planner's own solid angles.
     pub fn hold_at(&self, tree: &horizon_world::Tree, eye: [f64; 3]) -> bool {
+        self.holds(tree, eye).is_some()
+    }
+
+    /// [`Decisions::hold_at`], and which node the budget refuses there: the same
+    /// (`Some(None)`), or the frontier node at this index (`Some(Some(i))`). A frontier node
+    /// that grows past the refused one is refused in its place when refining it would go
+    /// over the entry budget too, with no other budget and no pending object: the cut is
+    /// the same, and only the node named as refused changes.
+    fn holds(&self, tree: &horizon_world::Tree, eye: [f64; 3]) -> Option<Option<usize>> {
+        let hold = |yes: bool| yes.then_some(None);
         let eye = eye_of(eye);
         let bvh = &tree.bvh;
         let worst = |node: NodeId| node_worst_case(bvh, node, eye);
@@ -177,7 +191,7 @@ impl Decisions {
             .iter()
             .any(|&(o, seen)| subtends(bvh, o, eye, min) != Some(seen))
         {
-            return false;
+            return None;
         }
         let imp = |n: NodeId| {
             let asset = self.nodes.get(n.0 as usize).and_then(Option::as_ref);
@@ -186,38 +200,101 @@ impl Decisions {
         if self.impostors.iter().any(|&(n, views)| {
             imp(n).map_or(0, |i| impostor_views(bvh, n, i, eye, self.pixel_angle)) != views
         }) {
-            return false;
+            return None;
         }
         if self.over_at_seed {
-            return true;
+            return Some(None);
         }
         // The weakest refined node, checking the order on the way where it matters.
         let mut weakest = f32::INFINITY;
         for &node in &self.refined {
-            let Some(a) = worst(node) else {
-                return false;
-            };
+            let a = worst(node)?;
             if a < min || (self.ordered && a >= weakest && weakest.is_finite()) {
-                return false;
+                return None;
             }
             weakest = weakest.min(a);
         }
         // Every other node stays behind the refused one, or under the solid angle.
-        let bar = match self.stopper {
-            Some(x) => {
-                let Some(ax) = worst(x) else {
-                    return false;
-                };
-                if ax < min || ax >= weakest {
-                    return false;
-                }
-                ax
-            }
-            None => min,
+        let Some(x) = self.stopper else {
+            return hold(
+                self.frontier
+                    .iter()
+                    .all(|&n| worst(n).is_some_and(|a| a < min)),
+            );
         };
-        self.frontier
-            .iter()
-            .all(|&node| worst(node).is_some_and(|a| a < bar))
+        let ax = worst(x)?;
+        if ax < min || ax >= weakest {
+            return None;
+        }
+        // The frontier node refinement would take next instead, if one grew past it.
+        let mut next: Option<(usize, f32)> = None;
+        for (i, &node) in self.frontier.iter().enumerate() {
+            let a = worst(node)?;
+            if a >= weakest {
+                return None;
+            }
+            if a >= ax && next.is_none_or(|(_, b)| a > b) {
+                next = Some((i, a));
+            }
+        }
+        let Some((i, af)) = next else {
+            return Some(None);
+        };
+        // Ties decide by node id: count them as changes.
+        let strictly_first = af > ax
+            && self
+                .frontier
+                .iter()
+                .enumerate()
+                .all(|(k, &n)| k == i || worst(n).is_some_and(|a| a < af));
+        let refused = !self.ordered
+            && self.pending.is_empty()
+            && strictly_first
+            && self.max_entries.is_some_and(|max| {
+                let node = self.frontier[i];
+                let own = bvh.node(node).map_or(0, |n| u64::from(n.count() > 0));
+                let refined = self.entries_refining(bvh, node);
+                self.entries.saturating_sub(own) + refined > max
+            });
+        refused.then_some(Some(i))
+    }
+
+    /// The entries refining `node` puts in its place: a leaf's objects, or each child's
+    /// aggregate (or instances, one entry all the same), or what stands for a child without
+    /// one, as [`Planner::expand`] makes them. Only without pending objects (none is
+    /// extracted) and with the node assets of the plan.
+    fn entries_refining(&self, bvh: &horizon_bvh::Bvh, node: NodeId) -> u64 {
+        let Some(n) = bvh.node(node) else {
+            return 0;
+        };
+        if n.is_leaf() {
+            return n.objects().count() as u64;
+        }
+        n.child_nodes()
+            .map(|child| {
+                let has_aggregate = self
+                    .nodes
+                    .get(child.0 as usize)
+                    .is_some_and(Option::is_some);
+                match bvh.node(child) {
+                    Some(c) if has_aggregate => u64::from(c.count() > 0),
+                    Some(_) => self.entries_refining(bvh, child),
+                    None => 0,
+                }
+            })
+            .sum()
+    }
+
+    /// The node whose refinement a budget refused, if one did.
+    pub fn refused(&self) -> Option<NodeId> {
+        self.stopper
+    }
+
+    /// Makes frontier node `i` the refused one, and the refused one a frontier node.
+    fn refuse_instead(&mut self, i: usize) {
+        if let Some(x) = self.stopper.as_mut() {
+            std::mem::swap(x, &mut self.frontier[i]);
+        }
     }
 }
 
@@ -1380,6 +1457,8 @@ impl<'a> Planner<'a> {
             ordered: b.max_bytes.is_some()
                 || b.max_draw_calls.is_some()
                 || b.max_triangles.is_some(),
+            entries: self.totals.entries,
+            max_entries: b.max_entries,
             pending: self
                 .pending
                 .iter()
@@ -1871,31 +1950,31 @@ impl Plan {
     /// keeps the cut. Under a byte, draw-call or triangle budget every level counts towards
     /// where refinement stops, and any change replans.
     pub fn carry_to(&mut self, tree: &horizon_world::Tree, eye: [f64; 3]) -> bool {
-        if !self.decisions.hold_at(tree, eye) {
+        let Some(refused) = self.decisions.holds(tree, eye) else {
             return false;
-        }
+        };
         let eye = eye_of(eye);
-        if self.consulted_levels_hold(tree, eye) {
-            // Every step of planning again would be this plan's.
-            return true;
-        }
-        if self.decisions.ordered {
-            // Some level changed, and under a byte, draw-call or triangle budget any level
-            // may move where refinement stops (also one charged for the refusal alone).
-            return false;
-        }
-        match self.levels_at(tree, eye) {
-            Some((chosen, changed)) => {
-                if changed {
-                    self.take_levels(tree, &chosen);
-                }
-                // Planning again would consult these levels; the bands follow them.
-                self.decisions.consulted = consulted(&chosen);
-                self.decisions.bands.clear();
-                true
+        if !self.consulted_levels_hold(tree, eye) {
+            if self.decisions.ordered {
+                // Some level changed, and under a byte, draw-call or triangle budget any
+                // level may move where refinement stops (also one charged for the refusal
+                // alone).
+                return false;
             }
-            None => false,
+            let Some((chosen, changed)) = self.levels_at(tree, eye) else {
+                return false;
+            };
+            if changed {
+                self.take_levels(tree, &chosen);
+            }
+            // Planning again would consult these levels; the bands follow them.
+            self.decisions.consulted = consulted(&chosen);
+            self.decisions.bands.clear();
         }
+        if let Some(i) = refused {
+            self.decisions.refuse_instead(i);
+        }
+        true
     }
 
     /// Whether every level the plan consulted is the level planning again at `eye` would
