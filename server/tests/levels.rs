@@ -464,7 +464,8 @@ async fn a_plan_carried_to_a_new_eye_is_the_plan_planning_again_makes() {
                     changed += 1;
                 }
             }
-            held = again;
+            // The stream goes on from the plan it carried: carry that one further.
+            held = if carries { moved } else { again };
         }
     }
     // Carrying happens, also where objects' own levels move under a kept cut, and a cut

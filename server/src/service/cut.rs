@@ -85,6 +85,7 @@ pub fn plan_after(
     }
     planner.seed();
     let stopped_by = planner.refine();
+    planner.refined_entries = planner.totals.entries;
     planner.frontier = planner.frontier();
     planner.share_models();
     planner.finish(stopped_by)
@@ -157,20 +158,24 @@ pub struct Decisions {
     /// Where each consulted level stays as it is, made at the first [`Plan::carry_to`]
     /// (empty before, and again once levels change).
     bands: Vec<LevelBand>,
-    /// Every node with an impostor that refinement put in the cut (also those refined later),
-    /// and the views it was charged for (0: none, its aggregate), with what deciding that
-    /// again needs.
+    /// Every node with an impostor that refinement put in the cut (also those refined later,
+    /// and the children of a refused node), and the views it was charged for (0: none, its
+    /// aggregate), with what deciding that again needs. After [`Decisions::refuse_instead`]
+    /// the children are still the first refused node's: checking them again is only stricter,
+    /// and without a byte, draw-call or triangle budget the new refused node's children
+    /// decide nothing (each is one entry whatever it is drawn as).
     impostors: Vec<(NodeId, u16)>,
     nodes: Arc<NodeAssets>,
     pixel_angle: f32,
 }
 
 impl Decisions {
-    /// Whether refinement at `eye`, on the tree the plan was made on, takes the same
-    /// decisions: the same nodes refined (in the same order where it matters), the same node
-    /// refused, every other node left, every pending object on the same side of
-    /// `min_solid_angle`. Ties count as changes (the planner breaks them by node id), so
-    /// "true" is exact: it evaluates the planner's own solid angles.
+    /// Whether refinement at `eye`, on the tree the plan was made on, makes the same cut:
+    /// the same nodes refined (in the same order where it matters), every other node left,
+    /// every pending object on the same side of `min_solid_angle`, and a refusal of the same
+    /// node or of one that grew past it (see [`Decisions::holds`]; [`Plan::carry_to`] then
+    /// names it). Ties count as changes (the planner breaks them by node id), so "true" is
+    /// exact: it evaluates the planner's own solid angles.
     pub fn hold_at(&self, tree: &horizon_world::Tree, eye: [f64; 3]) -> bool {
         self.holds(tree, eye).is_some()
     }
@@ -892,6 +897,8 @@ struct Planner<'a> {
     /// The nodes refinement left in the cut, but the one a budget refused (before
     /// [`Planner::share_models`] draws some as instances: they are left all the same).
     frontier: Vec<NodeId>,
+    /// The entries when refinement stopped.
+    refined_entries: u64,
 }
 
 /// How much more than an aggregate's bytes and draw calls the model levels it would need,
@@ -954,6 +961,7 @@ impl<'a> Planner<'a> {
             chosen: vec![std::cell::Cell::new(UNCHOSEN); tree.bvh.object_slots()],
             examined: Vec::new(),
             frontier: Vec::new(),
+            refined_entries: 0,
         }
     }
 
@@ -1457,7 +1465,7 @@ impl<'a> Planner<'a> {
             ordered: b.max_bytes.is_some()
                 || b.max_draw_calls.is_some()
                 || b.max_triangles.is_some(),
-            entries: self.totals.entries,
+            entries: self.refined_entries,
             max_entries: b.max_entries,
             pending: self
                 .pending
