@@ -6,7 +6,8 @@
 #      JSON and zstd-compressed (`Accept-Encoding: zstd`, as the viewer's browser asks);
 #   2. standing queries at 10 Hz per viewer, no mutations (`horizon-lab load`).
 # Server and load share this machine. JSON reports go to OUT/. RATES, ENCODINGS and VIEWERS
-# choose the figures (empty: none of that kind); H and L the binaries.
+# choose the figures (empty: none of that kind), MODES the modes of the standing queries
+# ("instances aggregates"); H and L the binaries.
 #
 #   cargo build --release -p horizon-server && cargo build --release -p horizon-lab
 #   bash lab/bench/instances_load.sh /tmp/city lab/results/reuse/load
@@ -16,6 +17,7 @@ OUT=${2:-lab/results/reuse/load}
 RATES=${RATES-"5 20 50"}
 ENCODINGS=${ENCODINGS-"identity zstd"}
 VIEWERS=${VIEWERS-"10 50"}
+MODES=${MODES-"instances aggregates"}
 SECONDS_EACH=${SECONDS_EACH:-20}
 H=${H:-target/release/horizon}
 L=${L:-target/release/horizon-lab}
@@ -48,7 +50,7 @@ for encoding in $ENCODINGS; do
   done
 done
 for viewers in $VIEWERS; do
-  for mode in instances aggregates; do
+  for mode in $MODES; do
     flag=""
     [ "$mode" = aggregates ] && flag="--no-instances"
     echo "load: $viewers viewers at 10 Hz, $mode" >&2

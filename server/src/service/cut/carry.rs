@@ -1,0 +1,291 @@
+//! Carrying a held plan to a new eye (a stream's view that may leave its cut as it was):
+//! [`Plan::carry_to`] answers, without planning, whether planning again there with the plan
+//! held ([`super::plan_after`]) would make the same cut, and if so makes the plan the one
+//! planning again would make.
+//!
+//! Three checks, cheapest first:
+//! - the node decisions ([`super::Decisions::holds`]): the worst-case solid angles of the
+//!   nodes refinement took, refused and left (core paper eq. 3), and, with only the entry
+//!   budget, a frontier node that grew past the refused one and is refused in its place;
+//! - every level of detail the plan consulted, against its [`LevelBand`]: one distance per
+//!   object, choosing again only outside the band;
+//! - where some level moved, whether it reaches the wire: a model's shared level
+//!   ([`super::share_levels`]), the weighing of instances (bottom-up, exact) and the assets
+//!   `share_models` found in the cut. Under a byte, draw-call or triangle budget any moved
+//!   level plans again.
+
+use super::*;
+
+impl Plan {
+    /// Carries this plan to `eye` if planning again there with it held ([`plan_after`]), on
+    /// the tree it was made on and with the rest of its view, gives the same cut: its
+    /// [`Decisions`] hold there, the aggregates the planner weighed against their objects
+    /// weigh the same, and every model keeps the level its objects share. The objects' own
+    /// levels (what the next step's hysteresis starts from) become those planning again
+    /// would give, so the plan is then the one planning again makes. False otherwise, and the
+    /// plan draws the same (its level bands may have been worked out).
+    ///
+    /// An object's own level matters to the wire only through its model's shared level
+    /// ([`share_levels`]) and the weighing of instances, so with 60,000 objects in a cut
+    /// (instances of a reused world) a small step that moves a few of them across a level
+    /// keeps the cut. Under a byte, draw-call or triangle budget every level counts towards
+    /// where refinement stops, and any change replans.
+    pub fn carry_to(&mut self, tree: &horizon_world::Tree, eye: [f64; 3]) -> bool {
+        let Some(refused) = self.decisions.holds(tree, eye) else {
+            return false;
+        };
+        let eye = eye_of(eye);
+        if !self.consulted_levels_hold(tree, eye) {
+            if self.decisions.ordered {
+                // Some level changed, and under a byte, draw-call or triangle budget any
+                // level may move where refinement stops (also one charged for the refusal
+                // alone).
+                return false;
+            }
+            let Some((chosen, changed)) = self.levels_at(tree, eye) else {
+                return false;
+            };
+            if changed {
+                self.take_levels(tree, &chosen);
+            }
+            // Planning again would consult these levels; the bands follow them.
+            self.decisions.consulted = consulted(&chosen);
+            self.decisions.bands.clear();
+        }
+        if let Some(i) = refused {
+            self.decisions.refuse_instead(i);
+        }
+        true
+    }
+
+    /// Whether every level the plan consulted is the level planning again at `eye` would
+    /// consult: within its [`LevelBand`], or else chosen again and found the same.
+    fn consulted_levels_hold(&mut self, tree: &horizon_world::Tree, eye: Vec3) -> bool {
+        if self.decisions.consulted.is_empty() {
+            return true;
+        }
+        if self.decisions.bands.is_empty() {
+            self.decisions.bands = self.level_bands(tree);
+        }
+        let pixel_angle = pixel_angle(&self.view);
+        let bvh = &tree.bvh;
+        self.decisions.bands.iter().all(|b| {
+            let d = (b.centre - eye).length() - b.radius;
+            if d > b.lo && d < b.hi {
+                return true;
+            }
+            let Some(r) = bvh.object(b.object) else {
+                return false;
+            };
+            let now = self
+                .models
+                .get(r.model() as usize)
+                .and_then(Option::as_ref)
+                .map_or(0, |m| {
+                    let held = (b.held != UNCHOSEN).then_some(b.held);
+                    level_at(m, &r, eye, pixel_angle, self.view.max_pixel_error, held)
+                });
+            now == b.level
+        })
+    }
+
+    /// The band of every consulted level: its object's own level is held where the object
+    /// is in the cut (as planning again with this plan held anchors it), chosen afresh
+    /// elsewhere.
+    fn level_bands(&self, tree: &horizon_world::Tree) -> Vec<LevelBand> {
+        let bvh = &tree.bvh;
+        let mut held = vec![UNCHOSEN; bvh.object_slots()];
+        for &(o, level) in &self.decisions.levels {
+            if let Some(slot) = held.get_mut(o.0 as usize) {
+                *slot = level;
+            }
+        }
+        let pixel_angle = pixel_angle(&self.view);
+        let max_pixel_error = self.view.max_pixel_error as f32;
+        self.decisions
+            .consulted
+            .iter()
+            .map(|&(o, level)| {
+                let held = held.get(o.0 as usize).copied().unwrap_or(UNCHOSEN);
+                let mut band = LevelBand {
+                    object: o,
+                    centre: Vec3::ZERO,
+                    radius: 0.0,
+                    lo: f32::INFINITY,
+                    hi: f32::NEG_INFINITY,
+                    level,
+                    held,
+                };
+                let Some(r) = bvh.object(o) else {
+                    return band;
+                };
+                let sphere = r.sphere();
+                (band.centre, band.radius) = (sphere.centre, sphere.radius);
+                if let Some(m) = self.models.get(r.model() as usize).and_then(Option::as_ref) {
+                    let scale = horizon_mesh::transform::max_axis_scale(&r.transform());
+                    let anchor = (held != UNCHOSEN).then_some(held);
+                    let (lo, hi) = m.band(level, anchor, scale, pixel_angle, max_pixel_error);
+                    (band.lo, band.hi) = (lo, hi);
+                }
+                band
+            })
+            .collect()
+    }
+
+    /// The objects' own levels planning again at `eye` would choose, by tree id, and whether
+    /// any differs from this plan's; none if planning again would make another cut. Only
+    /// without a byte, draw-call or triangle budget, where levels reach the wire through
+    /// shared levels, the weighing of instances and `share_models` alone.
+    fn levels_at(
+        &self,
+        tree: &horizon_world::Tree,
+        eye: Vec3,
+    ) -> Option<(Vec<std::cell::Cell<u8>>, bool)> {
+        let bvh = &tree.bvh;
+        let pixel_angle = pixel_angle(&self.view);
+        let max_pixel_error = self.view.max_pixel_error;
+        let chosen = vec![std::cell::Cell::new(UNCHOSEN); bvh.object_slots()];
+        // The (model, level) pairs whose objects changed: the assets `share_models` found
+        // in the cut may differ in these alone.
+        let mut touched: HashSet<(u64, u8)> = HashSet::new();
+        for &(o, level) in &self.decisions.levels {
+            let r = bvh.object(o)?;
+            let now = self
+                .models
+                .get(r.model() as usize)
+                .and_then(Option::as_ref)
+                .map_or(0, |m| {
+                    level_at(m, &r, eye, pixel_angle, max_pixel_error, Some(level))
+                });
+            if now != level {
+                touched.insert((r.model(), level));
+                touched.insert((r.model(), now));
+            }
+            chosen.get(o.0 as usize)?.set(now);
+        }
+        // Objects outside the cut have no held level: the chooser picks theirs afresh, as
+        // the planner would.
+        let unheld = HashMap::new();
+        let chooser = LevelChooser {
+            tree,
+            models: &self.models,
+            eye,
+            pixel_angle,
+            max_pixel_error,
+            held: &unheld,
+            chosen: &chosen,
+        };
+        let examined_hold = self.decisions.examined.iter().all(|&(o, level)| {
+            chooser.of(o) == level
+                && (touched.is_empty()
+                    || bvh
+                        .object(o)
+                        .is_some_and(|r| !touched.contains(&(r.model(), level))))
+        });
+        let instances = &self.decisions.instances;
+        let weighed_hold = examined_hold
+            && (instances.is_empty() || {
+                let weighed: HashSet<NodeId> = instances.iter().map(|&(n, _)| n).collect();
+                let now = chooser.instances_win_all(bvh.root(), &weighed, &self.decisions.nodes);
+                instances
+                    .iter()
+                    .all(|&(node, won)| now.get(&node).copied().unwrap_or(false) == won)
+            });
+        if !weighed_hold {
+            return None;
+        }
+        if !touched.is_empty() && !self.shared_levels_hold(tree, &chosen, &touched) {
+            return None;
+        }
+        Some((chosen, !touched.is_empty()))
+    }
+
+    /// Whether every model of `touched` keeps its shared level with its objects' own levels
+    /// at `chosen` ([`share_levels`], this plan's levels held).
+    fn shared_levels_hold(
+        &self,
+        tree: &horizon_world::Tree,
+        chosen: &[std::cell::Cell<u8>],
+        touched: &HashSet<(u64, u8)>,
+    ) -> bool {
+        let models: HashSet<u64> = touched.iter().map(|&(m, _)| m).collect();
+        let mut finest: HashMap<u64, u8> = HashMap::new();
+        for &(o, _) in &self.decisions.levels {
+            let Some(model) = tree.bvh.object(o).map(|r| r.model()) else {
+                return false;
+            };
+            if models.contains(&model) {
+                let now = chosen.get(o.0 as usize).map_or(0, std::cell::Cell::get);
+                let f = finest.entry(model).or_insert(now);
+                *f = (*f).min(now);
+            }
+        }
+        let held = self.model_levels();
+        finest.iter().all(|(model, &f)| {
+            held.get(model)
+                .is_some_and(|&h| shared_level(f, Some(h)) == h)
+        })
+    }
+
+    /// Takes the objects' own levels at `chosen` (tree ids) into the plan.
+    fn take_levels(&mut self, tree: &horizon_world::Tree, chosen: &[std::cell::Cell<u8>]) {
+        let now = |o: ObjectId| {
+            chosen
+                .get(o.0 as usize)
+                .map(std::cell::Cell::get)
+                .filter(|&l| l != UNCHOSEN)
+        };
+        for (o, level) in &mut self.decisions.levels {
+            if let Some(l) = now(*o) {
+                *level = l;
+            }
+        }
+        for p in &mut self.items {
+            match (&mut p.what, p.key) {
+                (Drawn::Object { needed, .. }, Key::Object { object, .. }) => {
+                    if let Some(l) = tree.tree_id(object).and_then(now) {
+                        *needed = l;
+                    }
+                }
+                (Drawn::Instances(instances), _)
+                    if instances
+                        .iter()
+                        .any(|i| now(i.tree).is_some_and(|l| l != i.needed)) =>
+                {
+                    for i in instances_mut(instances) {
+                        if let Some(l) = now(i.tree) {
+                            i.needed = l;
+                        }
+                    }
+                }
+                _ => {}
+            }
+        }
+    }
+}
+
+/// Every level a planner's chooser holds, by tree id.
+pub(super) fn consulted(chosen: &[std::cell::Cell<u8>]) -> Vec<(ObjectId, u8)> {
+    chosen
+        .iter()
+        .enumerate()
+        .filter(|(_, l)| l.get() != UNCHOSEN)
+        .map(|(o, l)| (ObjectId(o as u32), l.get()))
+        .collect()
+}
+
+/// The distances from an eye to an object's sphere at which its level of detail is surely
+/// `level` ([`ModelAsset::band`]): a plan carried to a new eye checks these instead of
+/// choosing 60,000 levels again, and chooses again only outside them.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct LevelBand {
+    object: ObjectId,
+    centre: Vec3,
+    radius: f32,
+    /// The level is `level` at distances strictly between these.
+    lo: f32,
+    hi: f32,
+    level: u8,
+    /// The level planning again holds the object to ([`UNCHOSEN`]: none).
+    held: u8,
+}
