@@ -59,7 +59,9 @@ export async function open(browser, url, { width = 960, height = 540 } = {}) {
   page.errors = [];
   page.on('console', (m) => { if (m.type() === 'error') page.errors.push(m.text()); });
   page.on('pageerror', (e) => page.errors.push(`uncaught: ${e.message}`));
-  await page.goto(url);
+  // A page's load event waits for its modules; with two other pages streaming and drawing in
+  // SwiftShader on two cores (the impostors test), it once took over the default 30 s.
+  await page.goto(url, { timeout: 120000 });
   await page.waitForFunction(() => window.horizon !== undefined, null, { timeout: 60000 });
   return page;
 }
