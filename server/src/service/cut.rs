@@ -322,15 +322,19 @@ fn subtends(bvh: &horizon_bvh::Bvh, object: ObjectId, eye: Vec3, min: f32) -> Op
     Some(solid_angle(s.radius, (s.centre - eye).length()) >= min)
 }
 
-/// The level of detail of an object (`r`) of model `m` seen from `eye`.
+/// The level of detail of an object (`r`) seen from `eye`: 0 when its model is not in
+/// `models` (the planner leaves such an object out, or draws it as level 0).
 fn level_at(
-    m: &ModelAsset,
+    models: &Models,
     r: &horizon_bvh::ObjectRef<'_>,
     eye: Vec3,
     pixel_angle: f32,
     max_pixel_error: f64,
     held: Option<u8>,
 ) -> u8 {
+    let Some(m) = models.get(r.model() as usize).and_then(Option::as_ref) else {
+        return 0;
+    };
     if m.levels.len() < 2 {
         return 0;
     }
@@ -1731,15 +1735,12 @@ impl LevelChooser<'_> {
         let Some(r) = self.tree.bvh.object(o) else {
             return 0;
         };
-        let Some(m) = self.models.get(r.model() as usize).and_then(Option::as_ref) else {
-            return 0;
-        };
         let held = self
             .tree
             .world_id(o)
             .and_then(|id| self.held.get(&id).copied());
         level_at(
-            m,
+            self.models,
             &r,
             self.eye,
             self.pixel_angle,

@@ -77,15 +77,9 @@ impl Plan {
             let Some(r) = bvh.object(b.object) else {
                 return false;
             };
-            let now = self
-                .models
-                .get(r.model() as usize)
-                .and_then(Option::as_ref)
-                .map_or(0, |m| {
-                    let held = (b.held != UNCHOSEN).then_some(b.held);
-                    level_at(m, &r, eye, pixel_angle, self.view.max_pixel_error, held)
-                });
-            now == b.level
+            let held = (b.held != UNCHOSEN).then_some(b.held);
+            let error = self.view.max_pixel_error;
+            level_at(&self.models, &r, eye, pixel_angle, error, held) == b.level
         })
     }
 
@@ -150,13 +144,14 @@ impl Plan {
         let mut touched: HashSet<(u64, u8)> = HashSet::new();
         for &(o, level) in &self.decisions.levels {
             let r = bvh.object(o)?;
-            let now = self
-                .models
-                .get(r.model() as usize)
-                .and_then(Option::as_ref)
-                .map_or(0, |m| {
-                    level_at(m, &r, eye, pixel_angle, max_pixel_error, Some(level))
-                });
+            let now = level_at(
+                &self.models,
+                &r,
+                eye,
+                pixel_angle,
+                max_pixel_error,
+                Some(level),
+            );
             if now != level {
                 touched.insert((r.model(), level));
                 touched.insert((r.model(), now));
