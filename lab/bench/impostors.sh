@@ -84,20 +84,12 @@ EOF
 done
 
 # The walks, each world served on its own.
-pid=
-cleanup() { if [ -n "$pid" ]; then kill "$pid" 2>/dev/null || true; wait "$pid" 2>/dev/null || true; fi; }
-trap cleanup EXIT
+source "$(dirname "${BASH_SOURCE[0]}")/lib.sh"
+trap stop EXIT
 for world in $WORLDS; do
   dir="$WORK/$world"
   rm -f "$dir/world.lock"
-  "$H" serve "$dir" --listen 127.0.0.1:0 > "$WORK/serve.out" 2> "$WORK/serve.log" &
-  pid=$!
-  for _ in $(seq 600); do
-    if grep -q "^listening on " "$WORK/serve.out" 2>/dev/null; then break; fi
-    sleep 0.2
-  done
-  url=$(sed -n 's/^listening on //p' "$WORK/serve.out" | head -1)
-  [ -n "$url" ] || { echo "horizon serve did not start" >&2; cat "$WORK/serve.log" >&2; exit 1; }
+  serve "$dir" "$WORK"
   python3 - "$url" > "$WORK/path_$world.json" <<'EOF'
 import json, sys, urllib.request
 b = json.load(urllib.request.urlopen(sys.argv[1] + "/v1/world"))["bounds"]
@@ -113,7 +105,7 @@ EOF
     "$C" walk "$url" --path "$WORK/path_$world.json" --speed "$speed" --duration 60 "${extra[@]}" \
       --json > "$OUT/${world}_walk_$mode.json"
   done
-  kill "$pid"; wait "$pid" 2>/dev/null || true; pid=
+  stop
 done
 python3 - "$OUT" $WORLDS <<'EOF'
 import json, pathlib, sys

@@ -22,20 +22,10 @@ H=${H:-target/release/horizon}
 C=${C:-target/release/horizon-client}
 mkdir -p "$OUT"
 work=$(mktemp -d)
-pid=
-cleanup() {
-  if [ -n "$pid" ]; then kill "$pid" 2>/dev/null || true; wait "$pid" 2>/dev/null || true; fi
-  rm -rf "$work"
-}
+source "$(dirname "${BASH_SOURCE[0]}")/lib.sh"
+cleanup() { stop; rm -rf "$work"; }
 trap cleanup EXIT
-"$H" serve "$WORLD" --listen 127.0.0.1:0 > "$work/serve.out" 2> "$work/serve.log" &
-pid=$!
-for _ in $(seq 600); do
-  if grep -q "^listening on " "$work/serve.out" 2>/dev/null; then break; fi
-  sleep 0.2
-done
-url=$(sed -n 's/^listening on //p' "$work/serve.out" | head -1)
-[ -n "$url" ] || { echo "horizon serve did not start" >&2; cat "$work/serve.log" >&2; exit 1; }
+serve "$WORLD"
 echo "$PATH_JSON" > "$work/path.json"
 for round in $(seq "$ROUNDS"); do
   for mode in progressive in-order; do

@@ -24,27 +24,9 @@ L=target/release/horizon-lab
 C=target/release/horizon-client
 mkdir -p "$OUT"
 work=$(mktemp -d)
-pid=
-cleanup() {
-  if [ -n "$pid" ]; then kill "$pid" 2>/dev/null || true; wait "$pid" 2>/dev/null || true; fi
-  rm -rf "$work"
-}
+source "$(dirname "${BASH_SOURCE[0]}")/lib.sh"
+cleanup() { stop; rm -rf "$work"; }
 trap cleanup EXIT
-
-serve() { # DIR: starts `horizon serve`, sets $pid and $url
-  "$H" serve "$1" --listen 127.0.0.1:0 > "$work/serve.out" 2> "$work/serve.log" &
-  pid=$!
-  for _ in $(seq 600); do
-    if grep -q "^listening on " "$work/serve.out" 2>/dev/null; then break; fi
-    sleep 0.2
-  done
-  url=$(sed -n 's/^listening on //p' "$work/serve.out" | head -1)
-  [ -n "$url" ] || { echo "horizon serve did not start" >&2; cat "$work/serve.log" >&2; exit 1; }
-  curl -sf "$url/v1/world" > /dev/null
-}
-stop() {
-  kill "$pid"; wait "$pid" 2>/dev/null || true; pid=
-}
 
 echo "copying $CITY" >&2
 cp -r "$CITY" "$work/city"

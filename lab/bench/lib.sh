@@ -1,0 +1,24 @@
+# Shared by the lab's shell benchmarks (source it). Serving a world on a free port:
+#   serve DIR [LOGS]   starts `$H serve DIR`, waits for the URL it prints, and sets $pid and
+#                      $url; its stdout and log go to LOGS (default $work)
+#   stop               ends it (nothing if none runs)
+# A script sets H, and calls `stop` from its EXIT trap.
+pid=
+
+serve() {
+  local logs=${2:-$work}
+  "$H" serve "$1" --listen 127.0.0.1:0 > "$logs/serve.out" 2> "$logs/serve.log" &
+  pid=$!
+  for _ in $(seq 600); do
+    if grep -q "^listening on " "$logs/serve.out" 2>/dev/null; then break; fi
+    sleep 0.2
+  done
+  url=$(sed -n 's/^listening on //p' "$logs/serve.out" | head -1)
+  [ -n "$url" ] || { echo "horizon serve did not start" >&2; cat "$logs/serve.log" >&2; exit 1; }
+  curl -sf "$url/v1/world" > /dev/null
+}
+
+stop() {
+  if [ -n "$pid" ]; then kill "$pid" 2>/dev/null || true; wait "$pid" 2>/dev/null || true; fi
+  pid=
+}
