@@ -423,6 +423,8 @@ pub enum Drawn {
         model: u64,
         /// Model to world.
         transform: Affine3A,
+        /// Its id in the tree the plan was made on.
+        tree: ObjectId,
         /// The coarsest level the object itself may be drawn at ([`ModelAsset::choose`]); the
         /// level drawn (the key's) is finer where another object of the model needs a finer
         /// one.
@@ -907,6 +909,11 @@ struct Planner<'a> {
     frontier: Vec<NodeId>,
     /// The entries when refinement stopped.
     refined_entries: u64,
+    /// Whether the cut's assets are counted: under a byte, draw-call or triangle budget,
+    /// and for [`Planner::share_models`], which asks which model levels the cut holds.
+    /// Otherwise entries alone are, and an object's level is chosen only for the entry
+    /// that draws it.
+    assets_count: bool,
 }
 
 /// How much more than an aggregate's bytes and draw calls the model levels it would need,
@@ -970,6 +977,10 @@ impl<'a> Planner<'a> {
             examined: Vec::new(),
             frontier: Vec::new(),
             refined_entries: 0,
+            assets_count: view.instances
+                || budgets.max_bytes.is_some()
+                || budgets.max_draw_calls.is_some()
+                || budgets.max_triangles.is_some(),
         }
     }
 
@@ -1268,6 +1279,10 @@ impl<'a> Planner<'a> {
         let Some(model) = self.served.tree.bvh.object(o).map(|o| o.model()) else {
             return;
         };
+        if !self.assets_count {
+            self.count_entry(sign);
+            return;
+        }
         let level = self.level_of(o);
         let (bytes, draw_calls, triangles) = self
             .models
@@ -1346,7 +1361,9 @@ impl<'a> Planner<'a> {
 
     fn charge(&mut self, key: AssetKey, bytes: u64, draw_calls: u64, triangles: u64, sign: i64) {
         self.count_entry(sign);
-        self.charge_asset(key, bytes, draw_calls, triangles, sign);
+        if self.assets_count {
+            self.charge_asset(key, bytes, draw_calls, triangles, sign);
+        }
     }
 
     /// An asset's bytes and draw calls, once per cut, and its triangles, every time.
@@ -1516,6 +1533,7 @@ impl<'a> Planner<'a> {
                 what: Drawn::Object {
                     model,
                     transform: r.transform(),
+                    tree: o,
                     needed: level,
                 },
                 covers: 1,
@@ -1578,18 +1596,14 @@ impl<'a> Planner<'a> {
         }
         decisions.levels = Vec::with_capacity(items.len());
         for p in &items {
-            match (p.key, &p.what) {
-                (Key::Object { object, .. }, Drawn::Object { needed, .. }) => {
-                    decisions
-                        .levels
-                        .extend(tree.tree_id(object).map(|o| (o, *needed)));
-                }
-                (_, Drawn::Instances(instances)) => {
+            match &p.what {
+                Drawn::Object { tree, needed, .. } => decisions.levels.push((*tree, *needed)),
+                Drawn::Instances(instances) => {
                     decisions
                         .levels
                         .extend(instances.iter().map(|i| (i.tree, i.needed)));
                 }
-                _ => {}
+                Drawn::Aggregate | Drawn::Impostor => {}
             }
         }
         decisions.consulted = consulted(&self.chosen);
@@ -2196,19 +2210,27 @@ impl Plan {
     /// why, then entries to add, each naming the removed entries whose objects it now
     /// draws. `served` is the tree this plan was made on; ancestry is read from it.
     pub fn diff(&self, before: &Plan, served: &Served<'_>) -> (Vec<Addition>, Vec<Removal>) {
-        let mut now: HashMap<Key, &Planned> = HashMap::with_capacity(self.items.len());
-        now.extend(self.items.iter().map(|p| (p.key, p)));
-        let mut old: HashMap<Key, &Planned> = HashMap::with_capacity(before.items.len());
-        old.extend(before.items.iter().map(|p| (p.key, p)));
-        let gone: Vec<&Planned> = before
-            .items
-            .iter()
-            .filter(|p| now.get(&p.key).is_none_or(|n| !n.same(p)))
-            .collect();
+        // One map, of the entries held: each planned entry looks up its key there, and the
+        // held entries no planned one kept are gone.
+        let mut old: HashMap<Key, usize> = HashMap::with_capacity(before.items.len());
+        old.extend(before.items.iter().enumerate().map(|(i, p)| (p.key, i)));
+        let mut kept = vec![false; before.items.len()];
         let fresh: Vec<&Planned> = self
             .items
             .iter()
-            .filter(|p| old.get(&p.key).is_none_or(|o| !o.same(p)))
+            .filter(|p| match old.get(&p.key) {
+                Some(&i) if before.items[i].same(p) => {
+                    kept[i] = true;
+                    false
+                }
+                _ => true,
+            })
+            .collect();
+        let gone: Vec<&Planned> = before
+            .items
+            .iter()
+            .zip(&kept)
+            .filter_map(|(p, &kept)| (!kept).then_some(p))
             .collect();
         if gone.is_empty() && fresh.is_empty() {
             return (Vec::new(), Vec::new());
@@ -2327,6 +2349,7 @@ mod tests {
             what: Drawn::Object {
                 model: 7,
                 transform: Affine3A::IDENTITY,
+                tree: ObjectId(object as u32),
                 needed,
             },
             covers: 1,

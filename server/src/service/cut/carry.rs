@@ -35,22 +35,27 @@ impl Plan {
             return false;
         };
         let eye = eye_of(eye);
-        if !self.consulted_levels_hold(tree, eye) {
+        let outside = self.levels_outside_bands(tree, eye);
+        if outside.iter().any(|&(_, level)| level == UNCHOSEN) {
+            // An object the tree lacks: not the tree the plan was made on.
+            return false;
+        }
+        let bands = &self.decisions.bands;
+        if outside.iter().any(|&(i, level)| level != bands[i].level) {
             if self.decisions.ordered {
                 // Some level changed, and under a byte, draw-call or triangle budget any
                 // level may move where refinement stops (also one charged for the refusal
                 // alone).
                 return false;
             }
-            let Some((chosen, changed)) = self.levels_at(tree, eye) else {
+            let Some((chosen, changed)) = self.levels_at(tree, eye, &outside) else {
                 return false;
             };
             if changed {
-                self.take_levels(tree, &chosen);
+                self.take_levels(&chosen);
             }
             // Planning again would consult these levels; the bands follow them.
-            self.decisions.consulted = consulted(&chosen);
-            self.decisions.bands.clear();
+            self.follow_levels(tree, &chosen);
         }
         if let Some(i) = refused {
             self.decisions.refuse_instead(i);
@@ -58,72 +63,102 @@ impl Plan {
         true
     }
 
-    /// Whether every level the plan consulted is the level planning again at `eye` would
-    /// consult: within its [`LevelBand`], or else chosen again and found the same.
-    fn consulted_levels_hold(&mut self, tree: &horizon_world::Tree, eye: Vec3) -> bool {
+    /// Every consulted level whose object is outside its [`LevelBand`] at `eye`, by its
+    /// band's index, with the level planning again there would consult (chosen again, held
+    /// as the band is); every other consulted level stays as it is. The bands are made here
+    /// if the plan has none yet.
+    fn levels_outside_bands(&mut self, tree: &horizon_world::Tree, eye: Vec3) -> Vec<(usize, u8)> {
         if self.decisions.consulted.is_empty() {
-            return true;
+            return Vec::new();
         }
         if self.decisions.bands.is_empty() {
             self.decisions.bands = self.level_bands(tree);
         }
         let pixel_angle = pixel_angle(&self.view);
+        let error = self.view.max_pixel_error;
         let bvh = &tree.bvh;
-        self.decisions.bands.iter().all(|b| {
+        let mut outside = Vec::new();
+        for (i, b) in self.decisions.bands.iter().enumerate() {
             let d = (b.centre - eye).length() - b.radius;
             if d > b.lo && d < b.hi {
-                return true;
+                continue;
             }
-            let Some(r) = bvh.object(b.object) else {
-                return false;
-            };
-            let held = (b.held != UNCHOSEN).then_some(b.held);
-            let error = self.view.max_pixel_error;
-            level_at(&self.models, &r, eye, pixel_angle, error, held) == b.level
-        })
+            let level = bvh.object(b.object).map_or(UNCHOSEN, |r| {
+                let held = (b.held != UNCHOSEN).then_some(b.held);
+                level_at(&self.models, &r, eye, pixel_angle, error, held)
+            });
+            outside.push((i, level));
+        }
+        outside
     }
 
     /// The band of every consulted level: its object's own level is held where the object
     /// is in the cut (as planning again with this plan held anchors it), chosen afresh
     /// elsewhere.
     fn level_bands(&self, tree: &horizon_world::Tree) -> Vec<LevelBand> {
-        let bvh = &tree.bvh;
-        let mut held = vec![UNCHOSEN; bvh.object_slots()];
+        let mut held = vec![UNCHOSEN; tree.bvh.object_slots()];
         for &(o, level) in &self.decisions.levels {
             if let Some(slot) = held.get_mut(o.0 as usize) {
                 *slot = level;
             }
         }
-        let pixel_angle = pixel_angle(&self.view);
-        let max_pixel_error = self.view.max_pixel_error as f32;
         self.decisions
             .consulted
             .iter()
             .map(|&(o, level)| {
                 let held = held.get(o.0 as usize).copied().unwrap_or(UNCHOSEN);
-                let mut band = LevelBand {
-                    object: o,
-                    centre: Vec3::ZERO,
-                    radius: 0.0,
-                    lo: f32::INFINITY,
-                    hi: f32::NEG_INFINITY,
-                    level,
-                    held,
-                };
-                let Some(r) = bvh.object(o) else {
-                    return band;
-                };
-                let sphere = r.sphere();
-                (band.centre, band.radius) = (sphere.centre, sphere.radius);
-                if let Some(m) = self.models.get(r.model() as usize).and_then(Option::as_ref) {
-                    let scale = horizon_mesh::transform::max_axis_scale(&r.transform());
-                    let anchor = (held != UNCHOSEN).then_some(held);
-                    let (lo, hi) = m.band(level, anchor, scale, pixel_angle, max_pixel_error);
-                    (band.lo, band.hi) = (lo, hi);
-                }
-                band
+                self.band(tree, o, level, held)
             })
             .collect()
+    }
+
+    /// Where `o` keeps `level`, held at `held` ([`UNCHOSEN`]: chosen afresh); an empty band
+    /// for an object the tree lacks.
+    fn band(&self, tree: &horizon_world::Tree, o: ObjectId, level: u8, held: u8) -> LevelBand {
+        let mut band = LevelBand {
+            object: o,
+            centre: Vec3::ZERO,
+            radius: 0.0,
+            lo: f32::INFINITY,
+            hi: f32::NEG_INFINITY,
+            level,
+            held,
+        };
+        let Some(r) = tree.bvh.object(o) else {
+            return band;
+        };
+        let sphere = r.sphere();
+        (band.centre, band.radius) = (sphere.centre, sphere.radius);
+        if let Some(m) = self.models.get(r.model() as usize).and_then(Option::as_ref) {
+            let scale = horizon_mesh::transform::max_axis_scale(&r.transform());
+            let anchor = (held != UNCHOSEN).then_some(held);
+            let pixel_angle = pixel_angle(&self.view);
+            let error = self.view.max_pixel_error as f32;
+            (band.lo, band.hi) = m.band(level, anchor, scale, pixel_angle, error);
+        }
+        band
+    }
+
+    /// Makes the consulted levels those at `chosen`, which the carried plan now holds (its
+    /// objects' own levels taken from it): a band whose level moved is made again, and all
+    /// of them if the chooser looked at objects the plan had not consulted.
+    fn follow_levels(&mut self, tree: &horizon_world::Tree, chosen: &[std::cell::Cell<u8>]) {
+        let consulted = consulted(chosen);
+        if consulted.len() != self.decisions.bands.len() {
+            self.decisions.consulted = consulted;
+            self.decisions.bands.clear();
+            return;
+        }
+        for (i, &(o, level)) in consulted.iter().enumerate() {
+            let b = self.decisions.bands[i];
+            debug_assert_eq!(b.object, o, "bands follow the consulted levels");
+            if b.level != level {
+                // An object in the cut is held at its own level, which is now this one.
+                let held = if b.held == UNCHOSEN { UNCHOSEN } else { level };
+                self.decisions.bands[i] = self.band(tree, o, level, held);
+            }
+        }
+        self.decisions.consulted = consulted;
     }
 
     /// The objects' own levels planning again at `eye` would choose, by tree id, and whether
@@ -134,29 +169,46 @@ impl Plan {
         &self,
         tree: &horizon_world::Tree,
         eye: Vec3,
+        outside: &[(usize, u8)],
     ) -> Option<(Vec<std::cell::Cell<u8>>, bool)> {
         let bvh = &tree.bvh;
         let pixel_angle = pixel_angle(&self.view);
         let max_pixel_error = self.view.max_pixel_error;
+        // Every consulted level, as its band or its choice outside it gives it: held at its
+        // own level for an object in the cut, chosen afresh for any other (as the chooser
+        // below would choose it).
         let chosen = vec![std::cell::Cell::new(UNCHOSEN); bvh.object_slots()];
+        for b in &self.decisions.bands {
+            chosen.get(b.object.0 as usize)?.set(b.level);
+        }
+        for &(i, level) in outside {
+            chosen
+                .get(self.decisions.bands[i].object.0 as usize)?
+                .set(level);
+        }
         // The (model, level) pairs whose objects changed: the assets `share_models` found
         // in the cut may differ in these alone.
         let mut touched: HashSet<(u64, u8)> = HashSet::new();
         for &(o, level) in &self.decisions.levels {
             let r = bvh.object(o)?;
-            let now = level_at(
-                &self.models,
-                &r,
-                eye,
-                pixel_angle,
-                max_pixel_error,
-                Some(level),
-            );
+            let slot = chosen.get(o.0 as usize)?;
+            if slot.get() == UNCHOSEN {
+                // Consulted levels include every object in the cut; this only if not.
+                let now = level_at(
+                    &self.models,
+                    &r,
+                    eye,
+                    pixel_angle,
+                    max_pixel_error,
+                    Some(level),
+                );
+                slot.set(now);
+            }
+            let now = slot.get();
             if now != level {
                 touched.insert((r.model(), level));
                 touched.insert((r.model(), now));
             }
-            chosen.get(o.0 as usize)?.set(now);
         }
         // Objects outside the cut have no held level: the chooser picks theirs afresh, as
         // the planner would.
@@ -223,7 +275,7 @@ impl Plan {
     }
 
     /// Takes the objects' own levels at `chosen` (tree ids) into the plan.
-    fn take_levels(&mut self, tree: &horizon_world::Tree, chosen: &[std::cell::Cell<u8>]) {
+    fn take_levels(&mut self, chosen: &[std::cell::Cell<u8>]) {
         let now = |o: ObjectId| {
             chosen
                 .get(o.0 as usize)
@@ -236,13 +288,13 @@ impl Plan {
             }
         }
         for p in &mut self.items {
-            match (&mut p.what, p.key) {
-                (Drawn::Object { needed, .. }, Key::Object { object, .. }) => {
-                    if let Some(l) = tree.tree_id(object).and_then(now) {
+            match &mut p.what {
+                Drawn::Object { tree, needed, .. } => {
+                    if let Some(l) = now(*tree) {
                         *needed = l;
                     }
                 }
-                (Drawn::Instances(instances), _)
+                Drawn::Instances(instances)
                     if instances
                         .iter()
                         .any(|i| now(i.tree).is_some_and(|l| l != i.needed)) =>
