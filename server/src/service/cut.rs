@@ -61,7 +61,7 @@ use horizon_world::{Served, World, WorldError};
 
 mod carry;
 
-use carry::{consulted, LevelBand};
+use carry::{consulted, BandWatch, LevelBand};
 
 /// Plans the cut for `view` over what `served` holds at `generation`: see the module docs.
 pub fn plan(served: &Served<'_>, models: &AssetTable, view: &View) -> Plan {
@@ -80,7 +80,7 @@ pub fn plan_after(
 ) -> Plan {
     let mut planner = Planner::new(served, models, view);
     if let Some(held) = held {
-        planner.held_levels = held.held_levels();
+        planner.held_levels = held.held_levels(served.tree);
         // A held model level may cost more bytes than the levels charged: held only where
         // no byte budget could be overrun by it.
         if view.budgets.max_bytes.is_none() {
@@ -160,8 +160,10 @@ pub struct Decisions {
     /// every level it looked at, a superset of those planning again consults.
     consulted: Vec<(ObjectId, u8)>,
     /// Where each consulted level stays as it is, made at the first [`Plan::carry_to`]
-    /// (empty before, and again once levels change).
+    /// (empty before, and again once the chooser consults more objects).
     bands: Vec<LevelBand>,
+    /// Which bands a carry checks (see [`BandWatch`]); none: every one.
+    watch: Option<BandWatch>,
     /// Every node with an impostor that refinement put in the cut (also those refined later,
     /// and the children of a refused node), and the views it was charged for (0: none, its
     /// aggregate), with what deciding that again needs. After [`Decisions::refuse_instead`]
@@ -890,7 +892,7 @@ struct Planner<'a> {
     /// Even the coarsest cut was over a budget: nothing was refined by solid angle.
     over_at_seed: bool,
     /// The level of detail each object has in the plan a client holds.
-    held_levels: HashMap<u64, u8>,
+    held_levels: HeldLevels,
     /// The level each model is drawn at in the plan a client holds (`share_levels`); empty
     /// under a byte budget.
     held_model_levels: HashMap<u64, u8>,
@@ -968,7 +970,7 @@ impl<'a> Planner<'a> {
             refined: Vec::new(),
             stopper: None,
             over_at_seed: false,
-            held_levels: HashMap::new(),
+            held_levels: HeldLevels::None,
             held_model_levels: HashMap::new(),
             pixel_angle: pixel_angle(view),
             impostor_choices: Vec::new(),
@@ -1505,6 +1507,7 @@ impl<'a> Planner<'a> {
             examined: std::mem::take(&mut self.examined),
             consulted: Vec::new(),
             bands: Vec::new(),
+            watch: None,
             impostors: {
                 let mut choices = std::mem::take(&mut self.impostor_choices);
                 choices.sort_unstable_by_key(|&(n, _)| n.0);
@@ -1717,6 +1720,30 @@ fn instances_content<const N: usize>(
     h
 }
 
+/// The levels of detail the objects have in the plan a client holds, which planning again
+/// keeps within [`LEVEL_MARGIN`].
+#[derive(Debug)]
+enum HeldLevels {
+    /// No plan held.
+    None,
+    /// By tree id, of a plan made on the same tree ([`UNCHOSEN`]: not held).
+    ByTree(Vec<u8>),
+    /// By world id, of a plan made on an earlier tree.
+    ByWorld(HashMap<u64, u8>),
+}
+
+impl HeldLevels {
+    fn of(&self, tree: &horizon_world::Tree, o: ObjectId) -> Option<u8> {
+        match self {
+            HeldLevels::None => None,
+            HeldLevels::ByTree(levels) => {
+                levels.get(o.0 as usize).copied().filter(|&l| l != UNCHOSEN)
+            }
+            HeldLevels::ByWorld(levels) => levels.get(&tree.world_id(o)?).copied(),
+        }
+    }
+}
+
 /// How a plan chooses objects' levels of detail, and weighs a node's instances against its
 /// aggregate: the planner and [`Plan::carry_to`] both use it, so that they agree to the bit.
 struct LevelChooser<'a> {
@@ -1726,7 +1753,7 @@ struct LevelChooser<'a> {
     pixel_angle: f32,
     max_pixel_error: f64,
     /// The levels objects have in the plan a client holds, by world id.
-    held: &'a HashMap<u64, u8>,
+    held: &'a HeldLevels,
     /// Levels already chosen, by tree id (empty: none kept).
     chosen: &'a [std::cell::Cell<u8>],
 }
@@ -1749,10 +1776,7 @@ impl LevelChooser<'_> {
         let Some(r) = self.tree.bvh.object(o) else {
             return 0;
         };
-        let held = self
-            .tree
-            .world_id(o)
-            .and_then(|id| self.held.get(&id).copied());
+        let held = self.held.of(self.tree, o);
         level_at(
             self.models,
             &r,
@@ -2108,9 +2132,30 @@ impl Plan {
         levels
     }
 
-    /// The levels of detail its objects need, by world id: what [`plan_after`] holds them
-    /// to.
-    fn held_levels(&self) -> HashMap<u64, u8> {
+    /// The levels of detail its objects need: what [`plan_after`] holds them to. By tree id
+    /// on the tree the plan was made on (its own levels, [`Decisions`]), else by world id.
+    fn held_levels(&self, tree: &horizon_world::Tree) -> HeldLevels {
+        if tree.generation == self.generation {
+            let mut levels = vec![UNCHOSEN; tree.bvh.object_slots()];
+            for &(o, level) in &self.decisions.levels {
+                if let Some(slot) = levels.get_mut(o.0 as usize) {
+                    *slot = level;
+                }
+            }
+            debug_assert!(
+                self.levels_by_world().iter().all(|(&w, &level)| {
+                    tree.tree_id(w)
+                        .is_some_and(|o| levels[o.0 as usize] == level)
+                }),
+                "a plan's own levels are its entries' levels"
+            );
+            return HeldLevels::ByTree(levels);
+        }
+        HeldLevels::ByWorld(self.levels_by_world())
+    }
+
+    /// Its entries' objects' own levels, by world id.
+    fn levels_by_world(&self) -> HashMap<u64, u8> {
         let mut held = HashMap::new();
         for p in &self.items {
             match &p.what {

@@ -8,7 +8,9 @@
 //!   nodes refinement took, refused and left (core paper eq. 3), and, with only the entry
 //!   budget, a frontier node that grew past the refused one and is refused in its place;
 //! - every level of detail the plan consulted, against its [`LevelBand`]: one distance per
-//!   object, choosing again only outside the band;
+//!   object, choosing again only outside the band, and within [`BAND_REACH`] of the eye
+//!   where all were last checked only the bands that were near an edge there
+//!   ([`BandWatch`]);
 //! - where some level moved, whether it reaches the wire: a model's shared level
 //!   ([`super::share_levels`]), the weighing of instances (bottom-up, exact) and the assets
 //!   `share_models` found in the cut. Under a byte, draw-call or triangle budget any moved
@@ -66,30 +68,59 @@ impl Plan {
     /// Every consulted level whose object is outside its [`LevelBand`] at `eye`, by its
     /// band's index, with the level planning again there would consult (chosen again, held
     /// as the band is); every other consulted level stays as it is. The bands are made here
-    /// if the plan has none yet.
+    /// if the plan has none yet. Within [`BAND_REACH`] of where every band was last
+    /// checked, only the bands its [`BandWatch`] names are.
     fn levels_outside_bands(&mut self, tree: &horizon_world::Tree, eye: Vec3) -> Vec<(usize, u8)> {
         if self.decisions.consulted.is_empty() {
             return Vec::new();
         }
         if self.decisions.bands.is_empty() {
             self.decisions.bands = self.level_bands(tree);
+            self.decisions.watch = None;
         }
+        let bands = &self.decisions.bands;
+        let distance = |b: &LevelBand| (b.centre - eye).length() - b.radius;
+        let inside = |b: &LevelBand, d: f32| d > b.lo && d < b.hi;
+        let mut outside: Vec<usize> = Vec::new();
+        match &self.decisions.watch {
+            Some(w) if w.covers(eye) => {
+                outside.extend(
+                    w.near
+                        .iter()
+                        .map(|&i| i as usize)
+                        .filter(|&i| !inside(&bands[i], distance(&bands[i]))),
+                );
+            }
+            _ => {
+                let mut near = Vec::new();
+                for (i, b) in bands.iter().enumerate() {
+                    let d = distance(b);
+                    if !inside(b, d) {
+                        outside.push(i);
+                    }
+                    if (d - b.lo).min(b.hi - d) < BAND_REACH || d.is_nan() {
+                        near.push(i as u32);
+                    }
+                }
+                self.decisions.watch = Some(BandWatch { eye, near });
+            }
+        }
+        outside.sort_unstable();
+        outside.dedup();
         let pixel_angle = pixel_angle(&self.view);
         let error = self.view.max_pixel_error;
         let bvh = &tree.bvh;
-        let mut outside = Vec::new();
-        for (i, b) in self.decisions.bands.iter().enumerate() {
-            let d = (b.centre - eye).length() - b.radius;
-            if d > b.lo && d < b.hi {
-                continue;
-            }
-            let level = bvh.object(b.object).map_or(UNCHOSEN, |r| {
-                let held = (b.held != UNCHOSEN).then_some(b.held);
-                level_at(&self.models, &r, eye, pixel_angle, error, held)
-            });
-            outside.push((i, level));
-        }
         outside
+            .into_iter()
+            .map(|i| {
+                let b = &bands[i];
+                let level = bvh.object(b.object).map_or(UNCHOSEN, |r| {
+                    let held = (b.held != UNCHOSEN).then_some(b.held);
+                    level_at(&self.models, &r, eye, pixel_angle, error, held)
+                });
+                (i, level)
+            })
+            .collect()
     }
 
     /// The band of every consulted level: its object's own level is held where the object
@@ -147,6 +178,7 @@ impl Plan {
         if consulted.len() != self.decisions.bands.len() {
             self.decisions.consulted = consulted;
             self.decisions.bands.clear();
+            self.decisions.watch = None;
             return;
         }
         for (i, &(o, level)) in consulted.iter().enumerate() {
@@ -155,6 +187,8 @@ impl Plan {
             if b.level != level {
                 // An object in the cut is held at its own level, which is now this one.
                 let held = if b.held == UNCHOSEN { UNCHOSEN } else { level };
+                // Only a band the eye left moves, and the watch names every such band, so
+                // it checks this one at every carry until all are checked again.
                 self.decisions.bands[i] = self.band(tree, o, level, held);
             }
         }
@@ -212,7 +246,7 @@ impl Plan {
         }
         // Objects outside the cut have no held level: the chooser picks theirs afresh, as
         // the planner would.
-        let unheld = HashMap::new();
+        let unheld = HeldLevels::None;
         let chooser = LevelChooser {
             tree,
             models: &self.models,
@@ -335,4 +369,29 @@ pub(super) struct LevelBand {
     level: u8,
     /// The level planning again holds the object to ([`UNCHOSEN`]: none).
     held: u8,
+}
+
+/// How far (world units) an eye may move from where every [`LevelBand`] was last checked
+/// before all are checked again; until then a carry checks only those that were within
+/// this of an edge there. A walk at 1.4 m/s and 10 views a second checks all every 14 views.
+pub(super) const BAND_REACH: f32 = 2.0;
+
+/// Far above the f32 rounding of an eye's distance to a band's object (about 1e-7 of it).
+const REACH_ROUNDING: f32 = 0.01;
+
+/// Where every band was last checked, and which were within [`BAND_REACH`] of an edge
+/// there: a band's distance moves by at most what the eye moves, so with the eye less than
+/// `BAND_REACH` from `eye` every other band holds. A band made again (its level moved) was
+/// outside, so it is one of those named.
+#[derive(Clone, Debug)]
+pub(super) struct BandWatch {
+    eye: Vec3,
+    near: Vec<u32>,
+}
+
+impl BandWatch {
+    /// Whether a carry to `eye` may check only the bands named.
+    fn covers(&self, eye: Vec3) -> bool {
+        (eye - self.eye).length() + REACH_ROUNDING < BAND_REACH
+    }
 }
