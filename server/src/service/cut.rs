@@ -157,7 +157,8 @@ pub struct Decisions {
     /// Every object whose level the plan consulted, with that level: planning again, with
     /// the same node decisions and these levels, takes every step the same way. After
     /// [`Plan::carry_to`] took new levels (never under a byte, draw-call or triangle budget),
-    /// every level it looked at, a superset of those planning again consults.
+    /// every level consulted before (at the new eye) and every level it looked at: a
+    /// superset of those planning again consults.
     consulted: Vec<(ObjectId, u8)>,
     /// Where each consulted level stays as it is, made at the first [`Plan::carry_to`]
     /// (empty before, and again once the chooser consults more objects).
@@ -1752,7 +1753,7 @@ struct LevelChooser<'a> {
     eye: Vec3,
     pixel_angle: f32,
     max_pixel_error: f64,
-    /// The levels objects have in the plan a client holds, by world id.
+    /// The levels objects have in the plan a client holds.
     held: &'a HeldLevels,
     /// Levels already chosen, by tree id (empty: none kept).
     chosen: &'a [std::cell::Cell<u8>],

@@ -25,7 +25,7 @@ impl Plan {
     /// weigh the same, and every model keeps the level its objects share. The objects' own
     /// levels (what the next step's hysteresis starts from) become those planning again
     /// would give, so the plan is then the one planning again makes. False otherwise, and the
-    /// plan draws the same (its level bands may have been worked out).
+    /// plan draws the same (its level bands and their watch may have been worked out).
     ///
     /// An object's own level matters to the wire only through its model's shared level
     /// ([`share_levels`]) and the weighing of instances, so with 60,000 objects in a cut
@@ -98,7 +98,10 @@ impl Plan {
                     if !inside(b, d) {
                         outside.push(i);
                     }
-                    if (d - b.lo).min(b.hi - d) < BAND_REACH || d.is_nan() {
+                    // Named unless surely inside by the reach and the rounding of `d` (NaN
+                    // compares false: named).
+                    let reach = BAND_REACH + ROUNDING * (d.abs() + b.radius);
+                    if !(d - b.lo >= reach && b.hi - d >= reach) {
                         near.push(i as u32);
                     }
                 }
@@ -376,8 +379,9 @@ pub(super) struct LevelBand {
 /// this of an edge there. A walk at 1.4 m/s and 10 views a second checks all every 14 views.
 pub(super) const BAND_REACH: f32 = 2.0;
 
-/// Far above the f32 rounding of an eye's distance to a band's object (about 1e-7 of it).
-const REACH_ROUNDING: f32 = 0.01;
+/// Far above the relative f32 rounding of the distances a [`BandWatch`] compares (about
+/// 1e-7 of each): added, times each distance, to the reach.
+const ROUNDING: f32 = 1e-5;
 
 /// Where every band was last checked, and which were within [`BAND_REACH`] of an edge
 /// there: a band's distance moves by at most what the eye moves, so with the eye less than
@@ -392,6 +396,7 @@ pub(super) struct BandWatch {
 impl BandWatch {
     /// Whether a carry to `eye` may check only the bands named.
     fn covers(&self, eye: Vec3) -> bool {
-        (eye - self.eye).length() + REACH_ROUNDING < BAND_REACH
+        let moved = (eye - self.eye).length();
+        moved + ROUNDING * (eye.length() + self.eye.length()) < BAND_REACH
     }
 }
