@@ -297,6 +297,18 @@ impl Decisions {
             .sum()
     }
 
+    /// Each object's own level by tree id, in a table of `slots` ([`UNCHOSEN`]: not in the
+    /// cut).
+    fn own_levels(&self, slots: usize) -> Vec<u8> {
+        let mut levels = vec![UNCHOSEN; slots];
+        for &(o, level) in &self.levels {
+            if let Some(slot) = levels.get_mut(o.0 as usize) {
+                *slot = level;
+            }
+        }
+        levels
+    }
+
     /// The node whose refinement a budget refused, if one did.
     pub fn refused(&self) -> Option<NodeId> {
         self.stopper
@@ -926,6 +938,12 @@ struct Planner<'a> {
 /// (`lab/results/reuse.md`).
 pub const SHARED_MODELS_FACTOR: f64 = 3.0;
 
+/// Whether `b` has a byte, draw-call or triangle budget: one that the cut's assets count
+/// towards, not its entries alone.
+fn bounds_costs(b: &Budgets) -> bool {
+    b.max_bytes.is_some() || b.max_draw_calls.is_some() || b.max_triangles.is_some()
+}
+
 /// A level not chosen yet (levels are far fewer).
 const UNCHOSEN: u8 = u8::MAX;
 
@@ -980,10 +998,7 @@ impl<'a> Planner<'a> {
             examined: Vec::new(),
             frontier: Vec::new(),
             refined_entries: 0,
-            assets_count: view.instances
-                || budgets.max_bytes.is_some()
-                || budgets.max_draw_calls.is_some()
-                || budgets.max_triangles.is_some(),
+            assets_count: view.instances || bounds_costs(&budgets),
         }
     }
 
@@ -1490,9 +1505,7 @@ impl<'a> Planner<'a> {
             frontier: std::mem::take(&mut self.frontier),
             stopper: self.stopper,
             over_at_seed: self.over_at_seed,
-            ordered: b.max_bytes.is_some()
-                || b.max_draw_calls.is_some()
-                || b.max_triangles.is_some(),
+            ordered: bounds_costs(b),
             entries: self.refined_entries,
             max_entries: b.max_entries,
             pending: self
@@ -2137,12 +2150,7 @@ impl Plan {
     /// on the tree the plan was made on (its own levels, [`Decisions`]), else by world id.
     fn held_levels(&self, tree: &horizon_world::Tree) -> HeldLevels {
         if tree.generation == self.generation {
-            let mut levels = vec![UNCHOSEN; tree.bvh.object_slots()];
-            for &(o, level) in &self.decisions.levels {
-                if let Some(slot) = levels.get_mut(o.0 as usize) {
-                    *slot = level;
-                }
-            }
+            let levels = self.decisions.own_levels(tree.bvh.object_slots());
             debug_assert!(
                 self.levels_by_world().iter().all(|(&w, &level)| {
                     tree.tree_id(w)

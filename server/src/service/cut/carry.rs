@@ -108,8 +108,6 @@ impl Plan {
                 self.decisions.watch = Some(BandWatch { eye, near });
             }
         }
-        outside.sort_unstable();
-        outside.dedup();
         let pixel_angle = pixel_angle(&self.view);
         let error = self.view.max_pixel_error;
         let bvh = &tree.bvh;
@@ -130,12 +128,7 @@ impl Plan {
     /// is in the cut (as planning again with this plan held anchors it), chosen afresh
     /// elsewhere.
     fn level_bands(&self, tree: &horizon_world::Tree) -> Vec<LevelBand> {
-        let mut held = vec![UNCHOSEN; tree.bvh.object_slots()];
-        for &(o, level) in &self.decisions.levels {
-            if let Some(slot) = held.get_mut(o.0 as usize) {
-                *slot = level;
-            }
-        }
+        let held = self.decisions.own_levels(tree.bvh.object_slots());
         self.decisions
             .consulted
             .iter()
