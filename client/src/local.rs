@@ -584,6 +584,7 @@ mod tests {
             objects: cut.objects(),
             entries,
             stopped_by: cut.stopped_by(),
+            coarsened: None,
         }
     }
 

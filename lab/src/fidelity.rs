@@ -19,7 +19,7 @@ use horizon_mesh::rng::Rng;
 use horizon_mesh::{import_bytes, Format, ImportOptions};
 use horizon_protocol::{Budgets, Entry, EntryKind, View};
 use horizon_server::outln;
-use horizon_server::service::cut::{plan, AssetTable};
+use horizon_server::service::cut::{plan, plan_with, AssetTable, Coarsening};
 use horizon_world::World;
 use serde::Serialize;
 
@@ -61,6 +61,14 @@ pub struct Args {
     /// instead of the finest its model needs anywhere in the cut.
     #[arg(long)]
     pub max_triangles: Option<u64>,
+    /// The cut's byte budget (each asset counted once).
+    #[arg(long)]
+    pub max_bytes: Option<u64>,
+    /// Also plan, render and measure each view's cut with levels of detail as the view asks
+    /// even where a byte, draw-call or triangle budget binds (no coarsening), the peer the
+    /// coarsened cut is compared with in the same run.
+    #[arg(long)]
+    pub coarsen_peer: bool,
     /// The geometric error, in pixels, an object's level of detail may show (0: every
     /// object at full detail).
     #[arg(long, default_value_t = horizon_protocol::DEFAULT_MAX_PIXEL_ERROR)]
@@ -144,6 +152,14 @@ pub struct ViewReport {
     pub meshes_only: Option<FlatReport>,
     /// The same cut without instances entries, with `--instances-peer`.
     pub aggregates_only: Option<FlatReport>,
+    /// The same cut with levels as the view asks where a budget binds, with
+    /// `--coarsen-peer`.
+    pub own_levels: Option<FlatReport>,
+    /// How many times wider than the image's pixel levels were chosen for, where a budget
+    /// bound (`Plan::coarsened`).
+    pub coarsened: Option<f32>,
+    /// Object entries of the cut (each an object drawn as itself).
+    pub object_entries: usize,
     /// Instances entries of the cut.
     pub instance_entries: usize,
     /// Milliseconds to plan the cut and make its entries (the median of five).
@@ -172,6 +188,8 @@ pub struct FlatReport {
     pub holes: f64,
     /// What it costs.
     pub cost: Cost,
+    /// Its object entries.
+    pub object_entries: usize,
 }
 
 /// What drawing a set of entries costs a client.
@@ -212,6 +230,8 @@ pub struct Report {
     pub max_draw_calls: Option<u64>,
     /// Triangle budget.
     pub max_triangles: Option<u64>,
+    /// Byte budget.
+    pub max_bytes: Option<u64>,
     /// Pixels of error a level of detail may show.
     pub max_pixel_error: f64,
     /// Per view.
@@ -299,9 +319,10 @@ pub fn measure(args: &Args) -> anyhow::Result<Report> {
             max_entries: Some(args.max_entries),
             max_draw_calls: args.max_draw_calls,
             max_triangles: args.max_triangles,
-            ..Budgets::default()
+            max_bytes: args.max_bytes,
         };
         let (cut_entries, plan_ms) = timed_plan(&world, &table, &view)?;
+        let coarsened = world.with_served(|s| plan(s, &table, &view).coarsened)?;
         let (plain_entries, plain_plan_ms) = if args.instances_peer {
             let plain = View {
                 instances: false,
@@ -323,12 +344,14 @@ pub fn measure(args: &Args) -> anyhow::Result<Report> {
         )?;
         costs.plan_ms = plan_ms;
         costs.plan_ms_without_instances = plain_plan_ms;
+        costs.coarsened = coarsened;
         let Some(full_scene) = &full_scene else {
             costs.aggregates_only = plain_entries.map(|e| FlatReport {
                 psnr: f64::NAN,
                 ssim: f64::NAN,
                 holes: f64::NAN,
                 cost: assets.cost(&e),
+                object_entries: objects_in(&e),
             });
             eprintln!(
                 "{name}: {} entries ({} aggregates, {} impostors), {:.1} MB",
@@ -362,6 +385,15 @@ pub fn measure(args: &Args) -> anyhow::Result<Report> {
         } else {
             None
         };
+        let own_levels = if args.coarsen_peer {
+            let entries = world.with_served(|s| {
+                plan_with(s, &table, &view, None, Coarsening::Fixed(1.0)).entries()
+            })?;
+            let frame = assets.scene(&entries)?.render(&camera, args.samples);
+            Some((entries, frame))
+        } else {
+            None
+        };
         let aggregates_only = match plain_entries {
             Some(entries) => {
                 let frame = assets.scene(&entries)?.render(&camera, args.samples);
@@ -387,11 +419,13 @@ pub fn measure(args: &Args) -> anyhow::Result<Report> {
                 ssim: c.ssim,
                 holes: c.holes,
                 cost: assets.cost(&entries),
+                object_entries: objects_in(&entries),
             }
         };
         let flat = flat.map(peer);
         let meshes_only = meshes_only.map(peer);
         let aggregates_only = aggregates_only.map(peer);
+        let own_levels = own_levels.map(peer);
         if let Some(dir) = &args.images {
             std::fs::create_dir_all(dir)?;
             full.save_png(&dir.join(format!("{name}-full.png")))?;
@@ -407,6 +441,7 @@ pub fn measure(args: &Args) -> anyhow::Result<Report> {
             flat,
             meshes_only,
             aggregates_only,
+            own_levels,
             ..costs
         };
         eprintln!(
@@ -428,9 +463,18 @@ pub fn measure(args: &Args) -> anyhow::Result<Report> {
         max_entries: args.max_entries,
         max_draw_calls: args.max_draw_calls,
         max_triangles: args.max_triangles,
+        max_bytes: args.max_bytes,
         max_pixel_error: args.max_pixel_error,
         views,
     })
+}
+
+/// How many entries are objects drawn as themselves.
+fn objects_in(entries: &[Entry]) -> usize {
+    entries
+        .iter()
+        .filter(|e| e.kind == EntryKind::Object)
+        .count()
 }
 
 /// Plans `view` five times; its entries and the median milliseconds a plan took.
@@ -488,6 +532,9 @@ fn costed(
         flat: None,
         meshes_only: None,
         aggregates_only: None,
+        own_levels: None,
+        coarsened: None,
+        object_entries: objects_in(cut_entries),
         plan_ms: f64::NAN,
         plan_ms_without_instances: None,
         instance_entries: cut_entries
@@ -639,6 +686,7 @@ fn focus(
                 ssim: c.ssim,
                 holes: c.holes,
                 cost: assets.cost(entries),
+                object_entries: objects_in(entries),
             })
         }
         None => None,
@@ -664,6 +712,7 @@ fn focus(
         max_entries: args.max_entries,
         max_draw_calls: args.max_draw_calls,
         max_triangles: args.max_triangles,
+        max_bytes: args.max_bytes,
         max_pixel_error: args.max_pixel_error,
         views: vec![ViewReport {
             name,
@@ -685,6 +734,9 @@ fn focus(
             flat: None,
             meshes_only,
             aggregates_only: None,
+            own_levels: None,
+            coarsened: None,
+            object_entries: objects_in(&drawn),
             instance_entries: 0,
             plan_ms: f64::NAN,
             plan_ms_without_instances: None,
@@ -1045,7 +1097,9 @@ fn print_table(r: &Report) -> anyhow::Result<()> {
             .map_or(String::new(), |d| format!(", at most {d} draw calls")),
         r.max_triangles.map_or(String::new(), |t| format!(
             ", at most {t} triangles (each object at its own level)"
-        ))
+        )) + &r
+            .max_bytes
+            .map_or(String::new(), |b| format!(", at most {} bytes", mb(b)))
     )?;
     outln!()?;
     outln!("| view | PSNR dB | SSIM | off >16 | holes | download full / cut | draw calls full / cut | triangles full / cut | entries (aggregates, instances) | aggregate IoU median / min / < 0.9 |")?;
@@ -1104,6 +1158,35 @@ fn print_table(r: &Report) -> anyhow::Result<()> {
                 ratio(v.cut.triangles, f.cost.triangles),
                 v.levelled,
                 v.entries
+            )?;
+        }
+    }
+    if r.views.iter().any(|v| v.own_levels.is_some()) {
+        outln!()?;
+        outln!("Levels coarsened where a budget binds against the same cut with levels as the view asks, both against the full world:")?;
+        outln!()?;
+        outln!("| view | coarsened by | download as asked / coarsened | triangles as asked / coarsened | object entries as asked / coarsened | PSNR dB as asked / coarsened | SSIM as asked / coarsened | holes as asked / coarsened |")?;
+        outln!("|---|---|---|---|---|---|---|---|")?;
+        for v in &r.views {
+            let Some(f) = &v.own_levels else { continue };
+            outln!(
+                "| {} | {} | {} / {} | {} / {} | {} / {} | {} / {} ({:+.2}) | {} / {} | {} / {} |",
+                v.name,
+                v.coarsened
+                    .map_or("not bound".to_string(), |c| format!("{c:.2}x")),
+                mb(f.cost.bytes),
+                mb(v.cut.bytes),
+                f.cost.triangles,
+                v.cut.triangles,
+                f.object_entries,
+                v.object_entries,
+                measured(f.psnr, |x| format!("{x:.1}")),
+                measured(v.psnr, |x| format!("{x:.1}")),
+                v.psnr - f.psnr,
+                measured(f.ssim, |x| format!("{x:.4}")),
+                measured(v.ssim, |x| format!("{x:.4}")),
+                measured(f.holes, |x| format!("{:.3}%", x * 100.0)),
+                measured(v.holes, |x| format!("{:.3}%", x * 100.0)),
             )?;
         }
     }

@@ -21,9 +21,9 @@ use futures_util::{SinkExt, StreamExt};
 use glam::{Affine3A, Vec3};
 use horizon_aggregate::AggregateOptions;
 use horizon_protocol::{
-    ClientMessage, CutResponse, EntryKind, ModelInfo, RemoveReason, ServerMessage, View,
+    ClientMessage, CutResponse, EntryKind, ModelInfo, RemoveReason, ServerMessage, StoppedBy, View,
 };
-use horizon_server::service::cut::{Drawn, Key, Plan};
+use horizon_server::service::cut::{Coarsening, Drawn, Key, Plan, COARSENING_STEP};
 use horizon_server::service::{app, run, AppState, Config};
 use horizon_world::World;
 use tokio::net::TcpListener;
@@ -67,6 +67,36 @@ fn world(name: &str) -> (TempDir, Arc<World>) {
     let world = World::create(&dir.0, name, 1, &models, &objects).unwrap();
     let (levelled, failures) = world.level_models(&|_, _| {}).unwrap();
     assert_eq!(levelled, MODELS);
+    assert!(failures.is_empty(), "{failures:?}");
+    world
+        .rebuild_aggregates(AggregateOptions::default(), &|_| {})
+        .unwrap();
+    (dir, Arc::new(world))
+}
+
+/// `n` distinct buildings, one of each, along +x from 20 m (spacing growing by 25% a step):
+/// a world whose cut's bytes are its objects' own, levelled and aggregated.
+fn distinct_row(name: &str, n: usize) -> (TempDir, Arc<World>) {
+    let dir = std::env::temp_dir().join(format!("horizon-levels-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let dir = TempDir(dir);
+    let models: Vec<(String, horizon_mesh::InstancedMesh)> = (0..n)
+        .map(|i| {
+            (
+                format!("building-{i}"),
+                horizon_worldgen::distinct_building(3, i).unwrap(),
+            )
+        })
+        .collect();
+    let objects: Vec<(usize, Affine3A)> = (0..n)
+        .map(|k| {
+            let x = 20.0 * 1.25f32.powi(k as i32);
+            (k, Affine3A::from_translation(Vec3::new(x, 0.0, 0.0)))
+        })
+        .collect();
+    let world = World::create(&dir.0, name, 1, &models, &objects).unwrap();
+    let (levelled, failures) = world.level_models(&|_, _| {}).unwrap();
+    assert_eq!(levelled, n);
     assert!(failures.is_empty(), "{failures:?}");
     world
         .rebuild_aggregates(AggregateOptions::default(), &|_| {})
@@ -490,8 +520,14 @@ async fn a_plan_at_the_edge_of_a_budget_is_never_carried_into_another_cut() {
         k.sort();
         k
     };
+    // Plans at the view's own levels, whatever binds: a plan whose levels a binding budget
+    // coarsened is never carried (`a_binding_budget_coarsens_levels_before_leaving_objects_to_
+    // aggregates`), so the carry's own checks at the edge of a budget are tested here.
+    let at_own = |view: &View, held: Option<&Plan>| {
+        state.plan_with(view, held, Coarsening::Fixed(1.0)).unwrap()
+    };
     let check = |held: &Plan, view: &View| -> bool {
-        let again = state.plan_after(view, Some(held)).unwrap();
+        let again = at_own(view, Some(held));
         let mut moved = held.clone();
         let carries = world
             .with_served(|served| moved.carry_to(served.tree, view.eye))
@@ -512,7 +548,7 @@ async fn a_plan_at_the_edge_of_a_budget_is_never_carried_into_another_cut() {
     view.min_solid_angle = 1e-6;
     view.instances = false;
     view.budgets.max_bytes = Some(1_127_903);
-    let held = state.plan(&view).unwrap();
+    let held = at_own(&view, None);
     view.eye = [
         -41.691_671_350_926_754,
         33.339_533_335_938_02,
@@ -542,21 +578,21 @@ async fn a_plan_at_the_edge_of_a_budget_is_never_carried_into_another_cut() {
             v
         };
         let b0 = (if triangles { 2e3 } else { 2e4 } * 10f64.powf(3.0 * rng.unit_f64())) as u64;
-        let base = keys(&state.plan(&with(&start, b0)).unwrap());
+        let base = keys(&at_own(&with(&start, b0), None));
         let (mut lo, mut hi) = (b0, b0 * 8);
-        if keys(&state.plan(&with(&start, hi)).unwrap()) == base {
+        if keys(&at_own(&with(&start, hi), None)) == base {
             continue;
         }
         while hi - lo > 1 {
             let mid = (lo + hi) / 2;
-            if keys(&state.plan(&with(&start, mid)).unwrap()) == base {
+            if keys(&at_own(&with(&start, mid), None)) == base {
                 lo = mid;
             } else {
                 hi = mid;
             }
         }
         let start = with(&start, lo);
-        let held = state.plan(&start).unwrap();
+        let held = at_own(&start, None);
         for _ in 0..12 {
             let mut v = start;
             let dir = rng.unit_vector();
@@ -572,4 +608,107 @@ async fn a_plan_at_the_edge_of_a_budget_is_never_carried_into_another_cut() {
         }
     }
     assert!(carried > 10 && steps > 100, "carried {carried} of {steps}");
+}
+
+/// The cut's download as budgets count it: each distinct asset once, previews aside.
+fn download(plan: &Plan) -> u64 {
+    let mut seen = HashSet::new();
+    plan.entries()
+        .iter()
+        .flat_map(|e| &e.assets)
+        .filter(|a| a.role != horizon_protocol::AssetRole::Preview)
+        .filter(|a| seen.insert(a.hash.clone()))
+        .map(|a| a.bytes)
+        .sum()
+}
+
+/// Each object entry's level, by object.
+fn object_levels(plan: &Plan) -> HashMap<u64, u32> {
+    plan.entries()
+        .iter()
+        .filter(|e| e.kind == EntryKind::Object)
+        .map(|e| (object_of(&e.id), e.level))
+        .collect()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_binding_budget_coarsens_levels_before_leaving_objects_to_aggregates() {
+    const N: usize = 12;
+    let (_dir, world) = distinct_row("coarsen", N);
+    let state = state(&world);
+    let mut view = View::at([0.0, 2.0, 0.0]);
+    // Every building subtends it: without a budget each is its own entry, at its level.
+    view.min_solid_angle = 1e-7;
+    view.instances = false;
+    let free = state.plan(&view).unwrap();
+    assert_eq!(free.stopped_by, None);
+    assert_eq!(object_levels(&free).len(), N);
+    let free_levels = object_levels(&free);
+    let mut coarsened = 0;
+    for share in [0.7, 0.5, 0.35] {
+        let budget = (download(&free) as f64 * share) as u64;
+        view.budgets.max_bytes = Some(budget);
+        let as_asked = state
+            .plan_with(&view, None, Coarsening::Fixed(1.0))
+            .unwrap();
+        let searched = state.plan(&view).unwrap();
+        let context = format!(
+            "budget {budget} ({share} of the free cut): as asked {} objects, searched {} at {:?}",
+            object_levels(&as_asked).len(),
+            object_levels(&searched).len(),
+            searched.coarsened
+        );
+        // Both within the budget and complete.
+        for p in [&as_asked, &searched] {
+            assert!(download(p) <= budget, "{context}");
+            assert_eq!(
+                p.entries().iter().map(|e| e.covers).sum::<u64>(),
+                N as u64,
+                "{context}"
+            );
+        }
+        // The budget binds at the asked levels, so the search ran.
+        assert_eq!(as_asked.stopped_by, Some(StoppedBy::MaxBytes), "{context}");
+        let Some(factor) = searched.coarsened else {
+            panic!("{context}: not searched");
+        };
+        if factor == 1.0 {
+            // Coarser levels went no further: the plan is the one as asked.
+            assert_eq!(drawn(&searched), drawn(&as_asked), "{context}");
+            continue;
+        }
+        coarsened += 1;
+        eprintln!("{context}");
+        // Every object drawn as itself at the asked levels still is, at its level or a
+        // coarser one, and more are.
+        let levels = object_levels(&searched);
+        for o in object_levels(&as_asked).keys() {
+            assert!(levels.contains_key(o), "{context}: object {o} left out");
+        }
+        assert!(levels.len() > object_levels(&as_asked).len(), "{context}");
+        for (o, level) in &levels {
+            assert!(
+                *level >= free_levels[o],
+                "{context}: object {o} finer than free"
+            );
+        }
+        // The least coarsening that goes as far: one step less falls short.
+        let less = state
+            .plan_with(&view, None, Coarsening::Fixed(factor / COARSENING_STEP))
+            .unwrap();
+        assert!(
+            less.stopped_by == Some(StoppedBy::MaxBytes)
+                && object_levels(&less).len() < levels.len(),
+            "{context}: a step less is {} objects, {:?}",
+            object_levels(&less).len(),
+            less.stopped_by
+        );
+        // Never carried: its levels came from comparing plans.
+        let mut moved = searched.clone();
+        let carries = world
+            .with_served(|served| moved.carry_to(served.tree, view.eye))
+            .unwrap();
+        assert!(!carries, "{context}");
+    }
+    assert!(coarsened >= 2, "coarsened at {coarsened} of 3 budgets");
 }

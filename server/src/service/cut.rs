@@ -72,13 +72,119 @@ pub fn plan(served: &Served<'_>, models: &AssetTable, view: &View) -> Plan {
 /// while that level stays within [`LEVEL_MARGIN`] of the level it would be given afresh, and
 /// a model the level its objects share there while that is fine enough and at most
 /// [`MODEL_LEVEL_SLACK`] finer than needed (`share_levels`).
+///
+/// When a byte, draw-call or triangle budget stops refinement, levels are coarsened before
+/// anything more is left to aggregates ([`Coarsening::Search`]).
 pub fn plan_after(
     served: &Served<'_>,
     models: &AssetTable,
     view: &View,
     held: Option<&Plan>,
 ) -> Plan {
+    plan_with(served, models, view, held, Coarsening::Search)
+}
+
+/// How a plan chooses levels of detail when a byte, draw-call or triangle budget binds.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Coarsening {
+    /// Levels as the view asks; where such a budget stops refinement, plan again with levels
+    /// chosen for pixels [`COARSENING_STEP`] times wider, then wider again up to
+    /// [`MAX_COARSENING`], and keep the finest levels that refine as far as the coarsest do
+    /// ([`search_coarsening`]).
+    Search,
+    /// Levels chosen for pixels this many times wider than the view's (1: as it asks),
+    /// whatever the budgets: the peer the search is measured against.
+    Fixed(f32),
+}
+
+/// One step of the coarsening ladder: a pixel's width times the square root of 2, so that a
+/// step halves a pixel's footprint's area.
+pub const COARSENING_STEP: f32 = std::f32::consts::SQRT_2;
+
+/// The widest pixel levels are chosen for when a budget binds: 64 times the view's (12 steps;
+/// a model's chain of quarter-triangle levels is seldom longer than 6).
+pub const MAX_COARSENING: f32 = 64.0;
+
+/// Steps of [`COARSENING_STEP`] up to [`MAX_COARSENING`].
+const COARSENING_STEPS: u32 = 12;
+
+/// [`plan_after`] with the coarsening of levels under a binding budget chosen by the caller.
+pub fn plan_with(
+    served: &Served<'_>,
+    models: &AssetTable,
+    view: &View,
+    held: Option<&Plan>,
+    coarsening: Coarsening,
+) -> Plan {
+    match coarsening {
+        Coarsening::Fixed(factor) => {
+            let mut p = plan_at(served, models, view, held, factor);
+            p.coarsened = (factor != 1.0).then_some(factor);
+            p
+        }
+        Coarsening::Search => {
+            search_coarsening(|factor| plan_at(served, models, view, held, factor))
+        }
+    }
+}
+
+/// The plan the issue asks for when a budget binds (issue 28: "coarser levels are chosen
+/// before anything is left out"): levels are coarsened step by step, and the plan kept is the
+/// one of the smallest step that refines as far as the coarsest step does (the same number of
+/// refinements, or refinement not stopped by a byte, draw-call or triangle budget at all).
+///
+/// Levels are all that a step changes, and coarser levels cost fewer bytes and triangles, so
+/// how far refinement goes grows with the step; the smallest such step is found by bisection
+/// between the view's own pixel (which bound) and the widest: at most 6 plans in all, and one
+/// when no such budget binds. Each plan found by the search is marked `coarsened`: its levels
+/// depend on plans at other steps, so a stream plans it again rather than carrying it.
+fn search_coarsening(plan_at: impl Fn(f32) -> Plan) -> Plan {
+    let reach = |p: &Plan| match p.stopped_by {
+        Some(StoppedBy::MaxBytes | StoppedBy::MaxDrawCalls | StoppedBy::MaxTriangles) => {
+            p.decisions.refined.len()
+        }
+        _ => usize::MAX,
+    };
+    let step = |k: u32| COARSENING_STEP.powi(k as i32).min(MAX_COARSENING);
+    let mark = |mut p: Plan, k: u32| {
+        p.coarsened = Some(step(k));
+        p
+    };
+    let fine = plan_at(1.0);
+    let at_fine = reach(&fine);
+    if at_fine == usize::MAX {
+        return fine;
+    }
+    let coarsest = plan_at(step(COARSENING_STEPS));
+    let target = reach(&coarsest);
+    if at_fine >= target {
+        return mark(fine, 0);
+    }
+    // Step `lo` falls short of the target, step `hi` reaches it.
+    let (mut lo, mut hi, mut best) = (0, COARSENING_STEPS, coarsest);
+    while hi - lo > 1 {
+        let mid = (lo + hi) / 2;
+        let p = plan_at(step(mid));
+        if reach(&p) >= target {
+            hi = mid;
+            best = p;
+        } else {
+            lo = mid;
+        }
+    }
+    mark(best, hi)
+}
+
+/// One plan with levels chosen for pixels `coarsening` times wider than the view's.
+fn plan_at(
+    served: &Served<'_>,
+    models: &AssetTable,
+    view: &View,
+    held: Option<&Plan>,
+    coarsening: f32,
+) -> Plan {
     let mut planner = Planner::new(served, models, view);
+    planner.level_pixel_angle = planner.pixel_angle * coarsening;
     if let Some(held) = held {
         planner.held_levels = held.held_levels(served.tree);
         // A held model level may cost more bytes than the levels charged: held only where
@@ -120,6 +226,10 @@ pub struct Plan {
     pub view: View,
     /// What refinement decided, to tell whether a new eye would decide the same.
     pub decisions: Decisions,
+    /// Where a byte, draw-call or triangle budget bound at the view's own levels of detail:
+    /// how many times wider than the view's the pixel was that levels were chosen for (1:
+    /// coarsening did not let refinement go further; see [`Coarsening::Search`]).
+    pub coarsened: Option<f32>,
 }
 
 /// The decisions that made a plan, by the node: with the same tree and the same view but
@@ -911,6 +1021,9 @@ struct Planner<'a> {
     held_model_levels: HashMap<u64, u8>,
     /// The angle of one pixel, radians.
     pixel_angle: f32,
+    /// The angle of the pixel levels of detail are chosen for: `pixel_angle`, or wider when
+    /// a budget binds ([`Coarsening`]).
+    level_pixel_angle: f32,
     /// Each node with an impostor put in the cut, and the views it was charged for.
     impostor_choices: Vec<(NodeId, u16)>,
     /// Each node whose instances were weighed against its aggregate, and the outcome.
@@ -992,6 +1105,7 @@ impl<'a> Planner<'a> {
             held_levels: HeldLevels::None,
             held_model_levels: HashMap::new(),
             pixel_angle: pixel_angle(view),
+            level_pixel_angle: pixel_angle(view),
             impostor_choices: Vec::new(),
             instance_choices: Vec::new(),
             chosen: vec![std::cell::Cell::new(UNCHOSEN); tree.bvh.object_slots()],
@@ -1013,7 +1127,7 @@ impl<'a> Planner<'a> {
             tree: self.served.tree,
             models: &self.models,
             eye: self.eye,
-            pixel_angle: self.pixel_angle,
+            pixel_angle: self.level_pixel_angle,
             max_pixel_error: self.view.max_pixel_error,
             held: &self.held_levels,
             chosen: &self.chosen,
@@ -1650,6 +1764,7 @@ impl<'a> Planner<'a> {
             missing_models: missing.get(),
             view: self.view,
             decisions,
+            coarsened: None,
         }
     }
 }

@@ -175,14 +175,27 @@ impl AppState {
         view: &horizon_protocol::View,
         held: Option<&cut::Plan>,
     ) -> Result<cut::Plan, horizon_world::WorldError> {
+        self.plan_with(view, held, cut::Coarsening::Search)
+    }
+
+    /// [`AppState::plan_after`] with the coarsening of levels under a binding budget given
+    /// (`cut::plan_with`): the lab's and the tests' peer.
+    pub fn plan_with(
+        &self,
+        view: &horizon_protocol::View,
+        held: Option<&cut::Plan>,
+        coarsening: cut::Coarsening,
+    ) -> Result<cut::Plan, horizon_world::WorldError> {
         let world = &self.inner.world;
         let models = &self.inner.models;
-        let plan = world.with_served(|served| cut::plan_after(served, models, view, held))?;
+        let plan_now =
+            || world.with_served(|served| cut::plan_with(served, models, view, held, coarsening));
+        let plan = plan_now()?;
         if plan.missing_models == 0 {
             return Ok(plan);
         }
         models.refresh(world)?;
-        world.with_served(|served| cut::plan_after(served, models, view, held))
+        plan_now()
     }
 
     /// One cut at `view`, off the async runtime.
@@ -198,6 +211,7 @@ impl AppState {
             objects: plan.objects,
             entries: plan.entries(),
             stopped_by: plan.stopped_by,
+            coarsened: plan.coarsened,
         })
     }
 
