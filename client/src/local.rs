@@ -584,7 +584,6 @@ mod tests {
             objects: cut.objects(),
             entries,
             stopped_by: cut.stopped_by(),
-            coarsened: None,
         }
     }
 

@@ -64,9 +64,9 @@ pub struct Args {
     /// The cut's byte budget (each asset counted once).
     #[arg(long)]
     pub max_bytes: Option<u64>,
-    /// Also plan, render and measure each view's cut with levels of detail as the view asks
-    /// even where a byte, draw-call or triangle budget binds (no coarsening), the peer the
-    /// coarsened cut is compared with in the same run.
+    /// Also plan, render and measure each view's cut with levels coarsened where a byte,
+    /// draw-call or triangle budget binds (`Coarsening::Search`, which the service does not
+    /// do), against the service's cut in the same run.
     #[arg(long)]
     pub coarsen_peer: bool,
     /// The geometric error, in pixels, an object's level of detail may show (0: every
@@ -152,14 +152,15 @@ pub struct ViewReport {
     pub meshes_only: Option<FlatReport>,
     /// The same cut without instances entries, with `--instances-peer`.
     pub aggregates_only: Option<FlatReport>,
-    /// The same cut with levels as the view asks where a budget binds, with
-    /// `--coarsen-peer`.
-    pub own_levels: Option<FlatReport>,
-    /// How many times wider than the image's pixel levels were chosen for, where a budget
-    /// bound (`Plan::coarsened`).
+    /// The same cut with levels coarsened where a budget binds, with `--coarsen-peer`.
+    pub coarsened_cut: Option<FlatReport>,
+    /// How many times wider than the image's pixel its levels were chosen for, where a
+    /// budget bound (`Plan::coarsened`).
     pub coarsened: Option<f32>,
     /// Object entries of the cut (each an object drawn as itself).
     pub object_entries: usize,
+    /// Milliseconds to plan the coarsened cut (the median of five), with `--coarsen-peer`.
+    pub plan_ms_coarsened: Option<f64>,
     /// Instances entries of the cut.
     pub instance_entries: usize,
     /// Milliseconds to plan the cut and make its entries (the median of five).
@@ -322,7 +323,6 @@ pub fn measure(args: &Args) -> anyhow::Result<Report> {
             max_bytes: args.max_bytes,
         };
         let (cut_entries, plan_ms) = timed_plan(&world, &table, &view)?;
-        let coarsened = world.with_served(|s| plan(s, &table, &view).coarsened)?;
         let (plain_entries, plain_plan_ms) = if args.instances_peer {
             let plain = View {
                 instances: false,
@@ -344,7 +344,6 @@ pub fn measure(args: &Args) -> anyhow::Result<Report> {
         )?;
         costs.plan_ms = plan_ms;
         costs.plan_ms_without_instances = plain_plan_ms;
-        costs.coarsened = coarsened;
         let Some(full_scene) = &full_scene else {
             costs.aggregates_only = plain_entries.map(|e| FlatReport {
                 psnr: f64::NAN,
@@ -385,10 +384,15 @@ pub fn measure(args: &Args) -> anyhow::Result<Report> {
         } else {
             None
         };
-        let own_levels = if args.coarsen_peer {
-            let entries = world.with_served(|s| {
-                plan_with(s, &table, &view, None, Coarsening::Fixed(1.0)).entries()
+        let coarsened_cut = if args.coarsen_peer {
+            let (entries, ms) = timed(|| {
+                world.with_served(|s| {
+                    plan_with(s, &table, &view, None, Coarsening::Search).entries()
+                })
             })?;
+            costs.plan_ms_coarsened = Some(ms);
+            costs.coarsened = world
+                .with_served(|s| plan_with(s, &table, &view, None, Coarsening::Search).coarsened)?;
             let frame = assets.scene(&entries)?.render(&camera, args.samples);
             Some((entries, frame))
         } else {
@@ -425,7 +429,7 @@ pub fn measure(args: &Args) -> anyhow::Result<Report> {
         let flat = flat.map(peer);
         let meshes_only = meshes_only.map(peer);
         let aggregates_only = aggregates_only.map(peer);
-        let own_levels = own_levels.map(peer);
+        let coarsened_cut = coarsened_cut.map(peer);
         if let Some(dir) = &args.images {
             std::fs::create_dir_all(dir)?;
             full.save_png(&dir.join(format!("{name}-full.png")))?;
@@ -441,7 +445,7 @@ pub fn measure(args: &Args) -> anyhow::Result<Report> {
             flat,
             meshes_only,
             aggregates_only,
-            own_levels,
+            coarsened_cut,
             ..costs
         };
         eprintln!(
@@ -479,11 +483,19 @@ fn objects_in(entries: &[Entry]) -> usize {
 
 /// Plans `view` five times; its entries and the median milliseconds a plan took.
 fn timed_plan(world: &World, table: &AssetTable, view: &View) -> anyhow::Result<(Vec<Entry>, f64)> {
+    timed(|| world.with_served(|s| plan(s, table, view).entries()))
+}
+
+/// Runs `plan` five times; its entries and the median milliseconds it took.
+fn timed<E>(plan: impl Fn() -> Result<Vec<Entry>, E>) -> anyhow::Result<(Vec<Entry>, f64)>
+where
+    anyhow::Error: From<E>,
+{
     let mut times = Vec::with_capacity(5);
     let mut entries = Vec::new();
     for _ in 0..5 {
         let started = Instant::now();
-        entries = world.with_served(|s| plan(s, table, view).entries())?;
+        entries = plan()?;
         times.push(started.elapsed().as_secs_f64() * 1e3);
     }
     times.sort_by(f64::total_cmp);
@@ -532,9 +544,10 @@ fn costed(
         flat: None,
         meshes_only: None,
         aggregates_only: None,
-        own_levels: None,
+        coarsened_cut: None,
         coarsened: None,
         object_entries: objects_in(cut_entries),
+        plan_ms_coarsened: None,
         plan_ms: f64::NAN,
         plan_ms_without_instances: None,
         instance_entries: cut_entries
@@ -734,9 +747,10 @@ fn focus(
             flat: None,
             meshes_only,
             aggregates_only: None,
-            own_levels: None,
+            coarsened_cut: None,
             coarsened: None,
             object_entries: objects_in(&drawn),
+            plan_ms_coarsened: None,
             instance_entries: 0,
             plan_ms: f64::NAN,
             plan_ms_without_instances: None,
@@ -1161,32 +1175,34 @@ fn print_table(r: &Report) -> anyhow::Result<()> {
             )?;
         }
     }
-    if r.views.iter().any(|v| v.own_levels.is_some()) {
+    if r.views.iter().any(|v| v.coarsened_cut.is_some()) {
         outln!()?;
-        outln!("Levels coarsened where a budget binds against the same cut with levels as the view asks, both against the full world:")?;
+        outln!("The service's cut (levels as the view asks) against the same cut with levels coarsened where a budget binds (`Coarsening::Search`), both against the full world:")?;
         outln!()?;
-        outln!("| view | coarsened by | download as asked / coarsened | triangles as asked / coarsened | object entries as asked / coarsened | PSNR dB as asked / coarsened | SSIM as asked / coarsened | holes as asked / coarsened |")?;
-        outln!("|---|---|---|---|---|---|---|---|")?;
+        outln!("| view | coarsened by | download as asked / coarsened | triangles as asked / coarsened | object entries as asked / coarsened | PSNR dB as asked / coarsened | SSIM as asked / coarsened | holes as asked / coarsened | plan ms as asked / coarsened |")?;
+        outln!("|---|---|---|---|---|---|---|---|---|")?;
         for v in &r.views {
-            let Some(f) = &v.own_levels else { continue };
+            let Some(f) = &v.coarsened_cut else { continue };
             outln!(
-                "| {} | {} | {} / {} | {} / {} | {} / {} | {} / {} ({:+.2}) | {} / {} | {} / {} |",
+                "| {} | {} | {} / {} | {} / {} | {} / {} | {} / {} ({:+.2}) | {} / {} | {} / {} | {:.1} / {:.1} |",
                 v.name,
                 v.coarsened
                     .map_or("not bound".to_string(), |c| format!("{c:.2}x")),
-                mb(f.cost.bytes),
                 mb(v.cut.bytes),
-                f.cost.triangles,
+                mb(f.cost.bytes),
                 v.cut.triangles,
-                f.object_entries,
+                f.cost.triangles,
                 v.object_entries,
-                measured(f.psnr, |x| format!("{x:.1}")),
+                f.object_entries,
                 measured(v.psnr, |x| format!("{x:.1}")),
-                v.psnr - f.psnr,
-                measured(f.ssim, |x| format!("{x:.4}")),
+                measured(f.psnr, |x| format!("{x:.1}")),
+                f.psnr - v.psnr,
                 measured(v.ssim, |x| format!("{x:.4}")),
-                measured(f.holes, |x| format!("{:.3}%", x * 100.0)),
+                measured(f.ssim, |x| format!("{x:.4}")),
                 measured(v.holes, |x| format!("{:.3}%", x * 100.0)),
+                measured(f.holes, |x| format!("{:.3}%", x * 100.0)),
+                v.plan_ms,
+                v.plan_ms_coarsened.unwrap_or(f64::NAN),
             )?;
         }
     }

@@ -183,12 +183,6 @@ pub struct CutResponse {
     pub entries: Vec<Entry>,
     /// The budget that stopped refinement, if one did.
     pub stopped_by: Option<StoppedBy>,
-    /// Present when a byte, draw-call or triangle budget stopped refinement with levels of
-    /// detail as the view asks: levels were then chosen for pixels this many times wider
-    /// (a power of the square root of 2, up to 64), the least that lets refinement go as far
-    /// as the coarsest levels would. 1 when coarser levels would not have gone further.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub coarsened: Option<f32>,
 }
 
 /// What an entry is.

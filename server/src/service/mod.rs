@@ -175,11 +175,11 @@ impl AppState {
         view: &horizon_protocol::View,
         held: Option<&cut::Plan>,
     ) -> Result<cut::Plan, horizon_world::WorldError> {
-        self.plan_with(view, held, cut::Coarsening::Search)
+        self.plan_with(view, held, cut::Coarsening::AsAsked)
     }
 
     /// [`AppState::plan_after`] with the coarsening of levels under a binding budget given
-    /// (`cut::plan_with`): the lab's and the tests' peer.
+    /// (`cut::plan_with`): what the lab and the tests compare the service's plans with.
     pub fn plan_with(
         &self,
         view: &horizon_protocol::View,
@@ -211,7 +211,6 @@ impl AppState {
             objects: plan.objects,
             entries: plan.entries(),
             stopped_by: plan.stopped_by,
-            coarsened: plan.coarsened,
         })
     }
 

@@ -1,0 +1,50 @@
+#!/usr/bin/env bash
+# Coarser levels where a budget binds (issue 28, "coarser levels are chosen before anything is
+# left out"), measured against the service's cut in the same run: `horizon-lab fidelity
+# --coarsen-peer` plans each seeded view (street, overhead, outside) twice under one budget,
+# with levels as the view asks (the service's cut, `Coarsening::AsAsked`) and with the search
+# that coarsens them where the budget stops refinement (`Coarsening::Search`), and ray-casts
+# both against the full world.
+#
+# Budgets: on city-distinct (DISTINCT buildings, default 2,000; its free cut downloads 53-89 MB)
+# bytes of 20, 40, 60 and 80 MB and 1.5M triangles; on the city (reused models, drawn mostly as
+# instances; its free cut downloads about 12 MB and draws 7-16M triangles) 2M and 4M triangles.
+# Worlds are generated with seed 1 into WORK (default /tmp/horizon-coarsen) and built there
+# once (delete WORK/WORLD/.built to rebuild). Tables and JSON go to OUT/.
+#
+#   cargo build --release -p horizon-server && cargo build --release -p horizon-lab
+#   bash lab/bench/coarsen.sh lab/results/levels/coarsen
+set -euo pipefail
+OUT=${1:-lab/results/levels/coarsen}
+WORK=${WORK:-/tmp/horizon-coarsen}
+H=${H:-target/release/horizon}
+L=${L:-target/release/horizon-lab}
+DISTINCT=${DISTINCT:-2000}
+mkdir -p "$OUT" "$WORK"
+for world in city city-distinct; do
+  dir="$WORK/$world"
+  if [ ! -f "$dir/world.db" ]; then
+    if [ "$world" = city-distinct ]; then
+      "$L" gen world "$world" "$dir" --seed 1 --objects "$DISTINCT" > /dev/null
+    else
+      "$L" gen world "$world" "$dir" --seed 1 > /dev/null
+    fi
+  fi
+  if [ ! -f "$dir/.built" ]; then
+    "$H" build "$dir" > "$WORK/build_$world.txt"
+    touch "$dir/.built"
+  fi
+done
+run() {
+  local world=$1 name=$2
+  shift 2
+  "$L" fidelity "$WORK/$world" --coarsen-peer "$@" --json-out "$OUT/${world}_$name.json" \
+    > "$OUT/${world}_$name.md"
+  echo "$world $name: $OUT/${world}_$name.md"
+}
+for mb in 20 40 60 80; do
+  run city-distinct "bytes${mb}mb" --max-bytes "${mb}000000"
+done
+run city-distinct triangles1.5m --max-triangles 1500000
+run city triangles2m --max-triangles 2000000
+run city triangles4m --max-triangles 4000000
