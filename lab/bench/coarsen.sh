@@ -1,10 +1,12 @@
 #!/usr/bin/env bash
-# Coarser levels where a budget binds (issue 28, "coarser levels are chosen before anything is
-# left out"), measured against the service's cut in the same run: `horizon-lab fidelity
-# --coarsen-peer` plans each seeded view (street, overhead, outside) twice under one budget,
-# with levels as the view asks (the service's cut, `Coarsening::AsAsked`) and with the search
-# that coarsens them where the budget stops refinement (`Coarsening::Search`), and ray-casts
-# both against the full world.
+# What the cut does where a byte, draw-call or triangle budget refuses a refinement, each way
+# measured against the service's cut in the same run: `horizon-lab fidelity --coarsen-peer
+# --stop-peer` plans each seeded view (street, overhead, outside) three times under one budget:
+#   - the service's cut: levels as the view asks, refinement going on past every refusal;
+#   - the same with the search that coarsens levels where the budget refuses (issue 28's
+#     "coarser levels are chosen before anything is left out"; `Coarsening::Search`);
+#   - the same stopped at the first refusal (`plan_stopping`, what the service did before);
+# and ray-casts all three against the full world.
 #
 # Budgets: on city-distinct (DISTINCT buildings, default 2,000; its free cut downloads 53-89 MB)
 # bytes of 20, 40, 60 and 80 MB and 1.5M triangles; on the city (reused models, drawn mostly as
@@ -38,7 +40,7 @@ done
 run() {
   local world=$1 name=$2
   shift 2
-  "$L" fidelity "$WORK/$world" --coarsen-peer "$@" --json-out "$OUT/${world}_$name.json" \
+  "$L" fidelity "$WORK/$world" --coarsen-peer --stop-peer "$@" --json-out "$OUT/${world}_$name.json" \
     > "$OUT/${world}_$name.md"
   echo "$world $name: $OUT/${world}_$name.md"
 }

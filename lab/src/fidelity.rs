@@ -19,7 +19,7 @@ use horizon_mesh::rng::Rng;
 use horizon_mesh::{import_bytes, Format, ImportOptions};
 use horizon_protocol::{Budgets, Entry, EntryKind, View};
 use horizon_server::outln;
-use horizon_server::service::cut::{plan, plan_with, AssetTable, Coarsening};
+use horizon_server::service::cut::{plan, plan_stopping, plan_with, AssetTable, Coarsening};
 use horizon_world::World;
 use serde::Serialize;
 
@@ -69,6 +69,11 @@ pub struct Args {
     /// do), against the service's cut in the same run.
     #[arg(long)]
     pub coarsen_peer: bool,
+    /// Also plan, render and measure each view's cut with refinement stopped at the first
+    /// refinement a byte, draw-call or triangle budget refuses (`plan_stopping`; the service
+    /// goes on past it), against the service's cut in the same run.
+    #[arg(long)]
+    pub stop_peer: bool,
     /// The geometric error, in pixels, an object's level of detail may show (0: every
     /// object at full detail).
     #[arg(long, default_value_t = horizon_protocol::DEFAULT_MAX_PIXEL_ERROR)]
@@ -154,6 +159,10 @@ pub struct ViewReport {
     pub aggregates_only: Option<FlatReport>,
     /// The same cut with levels coarsened where a budget binds, with `--coarsen-peer`.
     pub coarsened_cut: Option<FlatReport>,
+    /// The same cut stopped at the first refusal, with `--stop-peer`.
+    pub stopped_cut: Option<FlatReport>,
+    /// Refusals the service's cut went on past, with `--stop-peer`.
+    pub skipped: usize,
     /// How many times wider than the image's pixel its levels were chosen for, where a
     /// budget bound (`Plan::coarsened`).
     pub coarsened: Option<f32>,
@@ -161,6 +170,8 @@ pub struct ViewReport {
     pub object_entries: usize,
     /// Milliseconds to plan the coarsened cut (the median of five), with `--coarsen-peer`.
     pub plan_ms_coarsened: Option<f64>,
+    /// The same for the cut stopped at the first refusal, with `--stop-peer`.
+    pub plan_ms_stopping: Option<f64>,
     /// Instances entries of the cut.
     pub instance_entries: usize,
     /// Milliseconds to plan the cut and make its entries (the median of five).
@@ -191,6 +202,8 @@ pub struct FlatReport {
     pub cost: Cost,
     /// Its object entries.
     pub object_entries: usize,
+    /// Its entries.
+    pub entries: usize,
 }
 
 /// What drawing a set of entries costs a client.
@@ -351,6 +364,7 @@ pub fn measure(args: &Args) -> anyhow::Result<Report> {
                 holes: f64::NAN,
                 cost: assets.cost(&e),
                 object_entries: objects_in(&e),
+                entries: e.len(),
             });
             eprintln!(
                 "{name}: {} entries ({} aggregates, {} impostors), {:.1} MB",
@@ -385,14 +399,24 @@ pub fn measure(args: &Args) -> anyhow::Result<Report> {
             None
         };
         let coarsened_cut = if args.coarsen_peer {
-            let (entries, ms) = timed(|| {
+            let ((entries, coarsened), ms) = timed(|| {
                 world.with_served(|s| {
-                    plan_with(s, &table, &view, None, Coarsening::Search).entries()
+                    let p = plan_with(s, &table, &view, None, Coarsening::Search);
+                    (p.entries(), p.coarsened)
                 })
             })?;
             costs.plan_ms_coarsened = Some(ms);
-            costs.coarsened = world
-                .with_served(|s| plan_with(s, &table, &view, None, Coarsening::Search).coarsened)?;
+            costs.coarsened = coarsened;
+            let frame = assets.scene(&entries)?.render(&camera, args.samples);
+            Some((entries, frame))
+        } else {
+            None
+        };
+        let stopped_cut = if args.stop_peer {
+            costs.skipped = world.with_served(|s| plan(s, &table, &view).skipped)?;
+            let (entries, ms) =
+                timed(|| world.with_served(|s| plan_stopping(s, &table, &view).entries()))?;
+            costs.plan_ms_stopping = Some(ms);
             let frame = assets.scene(&entries)?.render(&camera, args.samples);
             Some((entries, frame))
         } else {
@@ -424,12 +448,14 @@ pub fn measure(args: &Args) -> anyhow::Result<Report> {
                 holes: c.holes,
                 cost: assets.cost(&entries),
                 object_entries: objects_in(&entries),
+                entries: entries.len(),
             }
         };
         let flat = flat.map(peer);
         let meshes_only = meshes_only.map(peer);
         let aggregates_only = aggregates_only.map(peer);
         let coarsened_cut = coarsened_cut.map(peer);
+        let stopped_cut = stopped_cut.map(peer);
         if let Some(dir) = &args.images {
             std::fs::create_dir_all(dir)?;
             full.save_png(&dir.join(format!("{name}-full.png")))?;
@@ -446,6 +472,7 @@ pub fn measure(args: &Args) -> anyhow::Result<Report> {
             meshes_only,
             aggregates_only,
             coarsened_cut,
+            stopped_cut,
             ..costs
         };
         eprintln!(
@@ -486,20 +513,21 @@ fn timed_plan(world: &World, table: &AssetTable, view: &View) -> anyhow::Result<
     timed(|| world.with_served(|s| plan(s, table, view).entries()))
 }
 
-/// Runs `plan` five times; its entries and the median milliseconds it took.
-fn timed<E>(plan: impl Fn() -> Result<Vec<Entry>, E>) -> anyhow::Result<(Vec<Entry>, f64)>
+/// Runs `plan` five times; what it made the last time and the median milliseconds it took.
+fn timed<T, E>(plan: impl Fn() -> Result<T, E>) -> anyhow::Result<(T, f64)>
 where
     anyhow::Error: From<E>,
 {
     let mut times = Vec::with_capacity(5);
-    let mut entries = Vec::new();
+    let mut made = None;
     for _ in 0..5 {
         let started = Instant::now();
-        entries = plan()?;
+        made = Some(plan()?);
         times.push(started.elapsed().as_secs_f64() * 1e3);
     }
     times.sort_by(f64::total_cmp);
-    Ok((entries, times[2]))
+    let made = made.ok_or_else(|| anyhow::anyhow!("nothing was planned"))?;
+    Ok((made, times[2]))
 }
 
 /// A view's report without its images: its costs and its aggregates' bounds, with PSNR,
@@ -545,6 +573,9 @@ fn costed(
         meshes_only: None,
         aggregates_only: None,
         coarsened_cut: None,
+        stopped_cut: None,
+        skipped: 0,
+        plan_ms_stopping: None,
         coarsened: None,
         object_entries: objects_in(cut_entries),
         plan_ms_coarsened: None,
@@ -700,6 +731,7 @@ fn focus(
                 holes: c.holes,
                 cost: assets.cost(entries),
                 object_entries: objects_in(entries),
+                entries: entries.len(),
             })
         }
         None => None,
@@ -748,6 +780,9 @@ fn focus(
             meshes_only,
             aggregates_only: None,
             coarsened_cut: None,
+            stopped_cut: None,
+            skipped: 0,
+            plan_ms_stopping: None,
             coarsened: None,
             object_entries: objects_in(&drawn),
             plan_ms_coarsened: None,
@@ -1203,6 +1238,38 @@ fn print_table(r: &Report) -> anyhow::Result<()> {
                 measured(f.holes, |x| format!("{:.3}%", x * 100.0)),
                 v.plan_ms,
                 v.plan_ms_coarsened.unwrap_or(f64::NAN),
+            )?;
+        }
+    }
+    if r.views.iter().any(|v| v.stopped_cut.is_some()) {
+        outln!()?;
+        outln!("The same cut stopped at the first refinement a budget refuses (`plan_stopping`) against the service's cut, which goes on past refusals, both against the full world:")?;
+        outln!()?;
+        outln!("| view | refusals skipped | download stops / skips | triangles stops / skips | entries stops / skips | object entries stops / skips | PSNR dB stops / skips | SSIM stops / skips | holes stops / skips | plan ms stops / skips |")?;
+        outln!("|---|---|---|---|---|---|---|---|---|---|")?;
+        for v in &r.views {
+            let Some(f) = &v.stopped_cut else { continue };
+            outln!(
+                "| {} | {} | {} / {} | {} / {} | {} / {} | {} / {} | {} / {} ({:+.2}) | {} / {} | {} / {} | {:.1} / {:.1} |",
+                v.name,
+                v.skipped,
+                mb(f.cost.bytes),
+                mb(v.cut.bytes),
+                f.cost.triangles,
+                v.cut.triangles,
+                f.entries,
+                v.entries,
+                f.object_entries,
+                v.object_entries,
+                measured(f.psnr, |x| format!("{x:.1}")),
+                measured(v.psnr, |x| format!("{x:.1}")),
+                v.psnr - f.psnr,
+                measured(f.ssim, |x| format!("{x:.4}")),
+                measured(v.ssim, |x| format!("{x:.4}")),
+                measured(f.holes, |x| format!("{:.3}%", x * 100.0)),
+                measured(v.holes, |x| format!("{:.3}%", x * 100.0)),
+                v.plan_ms_stopping.unwrap_or(f64::NAN),
+                v.plan_ms,
             )?;
         }
     }

@@ -133,9 +133,11 @@ impl View {
     }
 }
 
-/// The budgets of a cut. Refinement goes largest solid angle first and stops before one
-/// would be exceeded. A shared asset counts once per cut, and the placements of one asset
-/// one draw call, as a batching client draws them.
+/// The budgets of a cut. Refinement goes largest solid angle first and never exceeds one:
+/// it stops before `max_entries` would be exceeded, and skips a refinement that would exceed
+/// `max_bytes`, `max_draw_calls` or `max_triangles` while smaller ones go on filling it. A
+/// shared asset counts once per cut, and the placements of one asset one draw call, as a
+/// batching client draws them.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[serde(deny_unknown_fields)]

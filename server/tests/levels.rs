@@ -27,7 +27,9 @@ use horizon_aggregate::AggregateOptions;
 use horizon_protocol::{
     ClientMessage, CutResponse, EntryKind, ModelInfo, RemoveReason, ServerMessage, StoppedBy, View,
 };
-use horizon_server::service::cut::{Coarsening, Drawn, Key, Plan, COARSENING_STEP};
+use horizon_server::service::cut::{
+    coarsening_step, plan_stopping, AssetTable, Coarsening, Drawn, Key, Plan, COARSENING_STEPS,
+};
 use horizon_server::service::{app, run, AppState, Config};
 use horizon_world::World;
 use tokio::net::TcpListener;
@@ -694,8 +696,11 @@ async fn coarsening_under_a_binding_budget_keeps_drawn_levels_and_takes_the_leas
             );
         }
         // The least coarsening that goes as far: one step less falls short.
+        let k = (1..=COARSENING_STEPS)
+            .find(|&k| coarsening_step(k) == factor)
+            .unwrap();
         let less = state
-            .plan_with(&view, None, Coarsening::Fixed(factor / COARSENING_STEP))
+            .plan_with(&view, None, Coarsening::Fixed(coarsening_step(k - 1)))
             .unwrap();
         assert!(
             less.stopped_by == Some(StoppedBy::MaxBytes)
@@ -714,5 +719,105 @@ async fn coarsening_under_a_binding_budget_keeps_drawn_levels_and_takes_the_leas
     assert!(
         coarsened >= 3 && kept > 0,
         "coarsened at {coarsened} of 5 budgets, {kept} objects kept"
+    );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn refining_on_past_a_refusal_stays_within_the_budget_and_complete() {
+    const N: usize = 12;
+    let (_dir, row) = distinct_row("skip", N);
+    let row_state = state(&row);
+    let table = AssetTable::default();
+    table.refresh(&row).unwrap();
+    let mut view = View::at([0.0, 2.0, 0.0]);
+    view.min_solid_angle = 1e-7;
+    let free = row_state.plan(&view).unwrap();
+    let mut skipped = 0;
+    for share in [0.9, 0.7, 0.5, 0.35, 0.2] {
+        let budget = (download(&free) as f64 * share) as u64;
+        view.budgets.max_bytes = Some(budget);
+        let skips = row_state.plan(&view).unwrap();
+        let stops = row
+            .with_served(|s| plan_stopping(s, &table, &view))
+            .unwrap();
+        let context = format!(
+            "budget {budget} ({share} of the free cut): stops at {} objects, skips {} refusals to {}",
+            object_levels(&stops).len(),
+            skips.skipped,
+            object_levels(&skips).len()
+        );
+        assert!(download(&skips) <= budget, "{context}");
+        assert_eq!(
+            skips.entries().iter().map(|e| e.covers).sum::<u64>(),
+            N as u64,
+            "{context}"
+        );
+        assert_eq!(skips.stopped_by, stops.stopped_by, "{context}");
+        // Everything refinement took before its first refusal it still takes: every object
+        // drawn as itself there still is.
+        let drawn = object_levels(&skips);
+        for o in object_levels(&stops).keys() {
+            assert!(drawn.contains_key(o), "{context}: object {o}");
+        }
+        if skips.skipped > 0 {
+            skipped += 1;
+            // Never carried: its decisions do not describe the refinements after a refusal.
+            let mut moved = skips.clone();
+            let carries = row
+                .with_served(|served| moved.carry_to(served.tree, view.eye))
+                .unwrap();
+            assert!(!carries, "{context}");
+        }
+        eprintln!("{context}");
+    }
+    assert!(
+        skipped >= 3,
+        "skipped past a refusal at {skipped} of 5 budgets"
+    );
+    // Random eyes and budgets over the 120 buildings of three models, with and without
+    // instances: within every budget, and every object counted once.
+    let (_many_dir, many) = world("skip-many");
+    let many_state = state(&many);
+    let table = AssetTable::default();
+    table.refresh(&many).unwrap();
+    let mut rng = horizon_mesh::rng::Rng::new(5);
+    let mut skips_seen = 0;
+    for round in 0..40 {
+        let mut view = View::at([
+            -100.0 + 600.0 * rng.unit_f64(),
+            2.0 + 40.0 * rng.unit_f64(),
+            -60.0 + 200.0 * rng.unit_f64(),
+        ]);
+        view.min_solid_angle = [1e-4, 1e-5, 1e-6][round % 3];
+        view.instances = round % 2 == 0;
+        let scale = 10f64.powf(2.0 * rng.unit_f64());
+        if round % 4 < 2 {
+            view.budgets.max_triangles = Some((2e3 * scale) as u64);
+        } else {
+            view.budgets.max_bytes = Some((2e5 * scale) as u64);
+        }
+        let p = many_state.plan(&view).unwrap();
+        let entries = p.entries();
+        let context = format!("round {round}: {:?}, {} skipped", view.budgets, p.skipped);
+        assert_eq!(
+            entries.iter().map(|e| e.covers).sum::<u64>(),
+            (MODELS * ROW) as u64,
+            "{context}"
+        );
+        let within = |p: &Plan| {
+            let triangles: u64 = p.entries().iter().map(|e| e.triangles).sum();
+            triangles <= view.budgets.max_triangles.unwrap_or(u64::MAX)
+                && download(p) <= view.budgets.max_bytes.unwrap_or(u64::MAX)
+        };
+        // Over only where even the coarsest cut is, which the plan that stops says too.
+        let stops = many
+            .with_served(|s| plan_stopping(s, &table, &view))
+            .unwrap();
+        assert!(within(&p) || !within(&stops), "{context}");
+        skips_seen += usize::from(p.skipped > 1);
+    }
+    assert!(
+        skips_seen > 5,
+        "{skips_seen} plans skipped more than one refusal"
     );
 }

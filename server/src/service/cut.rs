@@ -6,9 +6,14 @@
 //! [`plan`] refines best-first from the root: the node whose worst case (an `r_max` object at
 //! the bound's nearest point) subtends the largest solid angle is replaced by its children (a
 //! leaf by its objects) while that angle is at least `min_solid_angle` and the cut stays
-//! within every budget. It stops before the first refinement that would exceed one, and says
-//! which. Every refinement replaces a node by exactly its children, so every object of the
-//! generation is counted exactly once, by itself or by one ancestor: the cut is complete.
+//! within every budget. The entry budget stops refinement before the first refinement that
+//! would exceed it. A refinement that would exceed the byte, draw-call or triangle budget is
+//! skipped, its node left in the cut, and refinement goes on with the next node, so the
+//! budget is filled by smaller nodes (measured against stopping there in
+//! `lab/results/levels.md`: never lower PSNR, up to 4.6 dB higher); `stopped_by` names the
+//! budget that refused first. Every refinement replaces a node by exactly its children, so
+//! every object of the generation is counted exactly once, by itself or by one ancestor: the
+//! cut is complete.
 //!
 //! Two things differ from the plain BVH cut, both because the tree runs ahead of the
 //! published aggregates:
@@ -98,13 +103,16 @@ pub enum Coarsening {
     /// and it is measured against [`Coarsening::AsAsked`] (`horizon-lab fidelity
     /// --coarsen-peer`, `lab/bench/coarsen.sh`, `lab/results/levels.md`): on the city and
     /// on 2,000 distinct buildings, at the 25 seeded views where a byte or triangle budget
-    /// bound, it changed 1 cut and lost 5.8 dB of PSNR there, at up to 3.3x the planning
-    /// time; coarsening every object alike changed 4 of 11 and lost 4.7 to 7.9 dB in 3 of
-    /// them. A cut is complete, so what a budget leaves out of refinement is drawn by an
-    /// aggregate, made for its node's display distance, and that spends the budget better
-    /// than coarser objects do. So the service does not search; the lab measures it.
+    /// binds, it changes no cut, since refinement already goes on past a refusal and fills
+    /// the budget. Before it did (refinement stopped at the first refusal) the search changed
+    /// 1 cut and lost 5.8 dB of PSNR there, and coarsening every object alike changed 4 of 11
+    /// and lost 4.7 to 7.9 dB in 3 of them. A cut is complete, so what a budget leaves out of
+    /// refinement is drawn by an aggregate, made for its node's display distance, and that
+    /// spends the budget better than coarser objects do. So the service does not search;
+    /// the lab measures it.
     Search,
-    /// The plan the search makes at this step.
+    /// The plan the search makes at this step ([`coarsening_step`]), marked `coarsened`;
+    /// at 1, the plan at the view's own levels, unmarked, as [`Coarsening::AsAsked`] makes.
     Fixed(f32),
 }
 
@@ -117,7 +125,18 @@ pub const COARSENING_STEP: f32 = std::f32::consts::SQRT_2;
 pub const MAX_COARSENING: f32 = 64.0;
 
 /// Steps of [`COARSENING_STEP`] up to [`MAX_COARSENING`].
-const COARSENING_STEPS: u32 = 12;
+pub const COARSENING_STEPS: u32 = 12;
+
+/// Step `k` of the coarsening ladder, `sqrt(2)^k`, exact at even steps (a power of 2) and
+/// the power of 2 below times [`COARSENING_STEP`] at odd ones.
+pub fn coarsening_step(k: u32) -> f32 {
+    let even = 2f32.powi((k / 2) as i32);
+    if k % 2 == 0 {
+        even
+    } else {
+        even * COARSENING_STEP
+    }
+}
 
 /// [`plan_after`] with the coarsening of levels under a binding budget chosen by the caller.
 pub fn plan_with(
@@ -127,22 +146,27 @@ pub fn plan_with(
     held: Option<&Plan>,
     coarsening: Coarsening,
 ) -> Plan {
-    let fine = plan_at(served, models, view, held, 1.0, None);
-    if matches!(coarsening, Coarsening::AsAsked | Coarsening::Fixed(1.0)) || !binds(&fine) {
+    let fine = plan_at(served, models, view, held, 1.0, None, true);
+    let fixed = match coarsening {
+        Coarsening::AsAsked => return fine,
+        Coarsening::Fixed(factor) if factor == 1.0 => return fine,
+        Coarsening::Fixed(factor) => Some(factor),
+        Coarsening::Search => None,
+    };
+    if !binds(&fine) {
         return fine;
     }
     // Objects drawn at the view's own levels keep them: coarsening is for what a budget
     // would otherwise leave to aggregates, not for the nearest and largest objects.
     let keep = fine.decisions.own_levels(served.tree.bvh.object_slots());
-    let at = |factor: f32| plan_at(served, models, view, held, factor, Some(&keep));
-    match coarsening {
-        Coarsening::AsAsked => fine,
-        Coarsening::Fixed(factor) => {
+    let at = |factor: f32| plan_at(served, models, view, held, factor, Some(&keep), true);
+    match fixed {
+        Some(factor) => {
             let mut p = at(factor);
             p.coarsened = Some(factor);
             p
         }
-        Coarsening::Search => search_coarsening(fine, at),
+        None => search_coarsening(fine, at),
     }
 }
 
@@ -162,8 +186,11 @@ fn binds(p: &Plan) -> bool {
 /// refinements, or refinement not stopped by such a budget at all).
 ///
 /// Only levels change from step to step, and coarser levels cost fewer bytes and triangles,
-/// so how far refinement goes grows with the step; the smallest such step is found by
-/// bisection: at most 5 plans besides `fine`. Coarsening every object alike was measured and
+/// so how far refinement goes mostly grows with the step, and the step is found by bisection
+/// as if it always did: at most 5 plans besides `fine`. It is not always so (instances are
+/// weighed by levels and never refined, and a kept and a coarsened object of one model may
+/// need two of its levels), so the step returned reaches as far as the widest and stays
+/// within the budgets, but a smaller one might too. Coarsening every object alike was measured and
 /// lost: on 2,000 distinct buildings it drew more buildings but the nearest ones coarser, up
 /// to 8 dB of PSNR below the plan at the view's own levels (`lab/results/levels.md`). Each
 /// plan found by the search is marked `coarsened`: its levels depend on plans at other steps,
@@ -176,7 +203,7 @@ fn search_coarsening(fine: Plan, plan_at: impl Fn(f32) -> Plan) -> Plan {
             usize::MAX
         }
     };
-    let step = |k: u32| COARSENING_STEP.powi(k as i32).min(MAX_COARSENING);
+    let step = coarsening_step;
     let mark = |mut p: Plan, k: u32| {
         p.coarsened = Some(step(k));
         p
@@ -202,8 +229,18 @@ fn search_coarsening(fine: Plan, plan_at: impl Fn(f32) -> Plan) -> Plan {
     mark(best, hi)
 }
 
+/// [`plan`], but refinement stops at the first refinement that a byte, draw-call or
+/// triangle budget refuses, instead of going on past it: what the service did before it
+/// filled budgets, the peer the lab measures the fill against (`horizon-lab fidelity
+/// --stop-peer`, `lab/results/levels.md`).
+pub fn plan_stopping(served: &Served<'_>, models: &AssetTable, view: &View) -> Plan {
+    plan_at(served, models, view, None, 1.0, None, false)
+}
+
 /// One plan with levels chosen for pixels `coarsening` times wider than the view's, but
-/// those `keep` gives (by tree id; [`UNCHOSEN`]: none).
+/// those `keep` gives (by tree id; [`UNCHOSEN`]: none); refinements a byte, draw-call or
+/// triangle budget refuses skipped (`skip_refused`, the service's way) or stopping
+/// refinement ([`plan_stopping`]).
 fn plan_at(
     served: &Served<'_>,
     models: &AssetTable,
@@ -211,8 +248,10 @@ fn plan_at(
     held: Option<&Plan>,
     coarsening: f32,
     keep: Option<&[u8]>,
+    skip_refused: bool,
 ) -> Plan {
     let mut planner = Planner::new(served, models, view);
+    planner.skip_refused = skip_refused && bounds_costs(&planner.budgets);
     planner.level_pixel_angle = planner.pixel_angle * coarsening;
     if let Some(keep) = keep {
         for (slot, &level) in planner.chosen.iter().zip(keep) {
@@ -264,6 +303,9 @@ pub struct Plan {
     /// how many times wider than the view's the pixel was that levels were chosen for (1:
     /// coarsening did not let refinement go further; see [`Coarsening::Search`]).
     pub coarsened: Option<f32>,
+    /// Refinements a byte, draw-call or triangle budget refused and refinement went on past
+    /// (0 for a plan of [`plan_stopping`]).
+    pub skipped: usize,
 }
 
 /// The decisions that made a plan, by the node: with the same tree and the same view but
@@ -1076,6 +1118,10 @@ struct Planner<'a> {
     /// Otherwise entries alone are, and an object's level is chosen only for the entry
     /// that draws it.
     assets_count: bool,
+    /// Skip a refinement a byte, draw-call or triangle budget refuses and go on (else stop
+    /// there, [`plan_stopping`]), and how many were.
+    skip_refused: bool,
+    skipped: usize,
 }
 
 /// How much more than an aggregate's bytes and draw calls the model levels it would need,
@@ -1147,6 +1193,8 @@ impl<'a> Planner<'a> {
             frontier: Vec::new(),
             refined_entries: 0,
             assets_count: view.instances || bounds_costs(&budgets),
+            skip_refused: false,
+            skipped: 0,
         }
     }
 
@@ -1188,11 +1236,20 @@ impl<'a> Planner<'a> {
             self.over_at_seed = true;
             return Some(over);
         }
+        let mut first_refusal = None;
+        // After a skipped refusal, the refused node is pushed again and its children stay
+        // pushed though they were taken out of the cut: neither is tried.
+        let mut refused: HashSet<NodeId> = HashSet::new();
         while let Some(top) = self.heap.pop() {
             if top.solid_angle < self.min_solid_angle {
-                return None;
+                return first_refusal;
             }
             let node = top.node;
+            if !refused.is_empty()
+                && (refused.contains(&node) || !self.units.contains(&Unit::Node(node)))
+            {
+                continue;
+            }
             let tree: &'a horizon_world::Tree = self.served.tree;
             let Some(n) = tree.bvh.node(node) else {
                 continue;
@@ -1214,12 +1271,20 @@ impl<'a> Planner<'a> {
                     self.put(unit, -1);
                 }
                 self.put(Unit::Node(node), 1);
+                let over_entries = over == StoppedBy::MaxEntries;
+                if self.skip_refused && !over_entries {
+                    self.stopper.get_or_insert(node);
+                    refused.insert(node);
+                    first_refusal.get_or_insert(over);
+                    self.skipped += 1;
+                    continue;
+                }
                 self.stopper = Some(node);
                 return Some(over);
             }
             self.refined.push(node);
         }
-        None
+        first_refusal
     }
 
     /// The nodes refinement left in the cut, but the one a budget refused.
@@ -1771,6 +1836,8 @@ impl<'a> Planner<'a> {
                 Drawn::Aggregate | Drawn::Impostor => {}
             }
         }
+        // In a coarsened plan this names every kept level too, consulted or not: such a plan
+        // is never carried (`Plan::carry_to`), so the bands never see them.
         decisions.consulted = consulted(&self.chosen);
         if self.budgets.max_triangles.is_none() {
             share_levels(&mut items, &self.held_model_levels);
@@ -1799,6 +1866,7 @@ impl<'a> Planner<'a> {
             view: self.view,
             decisions,
             coarsened: None,
+            skipped: self.skipped,
         }
     }
 }

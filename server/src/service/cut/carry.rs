@@ -31,11 +31,13 @@ impl Plan {
     /// ([`share_levels`]) and the weighing of instances, so with 60,000 objects in a cut
     /// (instances of a reused world) a small step that moves a few of them across a level
     /// keeps the cut. Under a byte, draw-call or triangle budget every level counts towards
-    /// where refinement stops, and any change replans; a plan whose levels were coarsened
-    /// because such a budget bound ([`Plan::coarsened`]) always does.
+    /// where refinement stops, and any change replans; a plan that went on past a refusal
+    /// of such a budget ([`Plan::skipped`]) or whose levels were coarsened because one bound
+    /// ([`Plan::coarsened`]) always does.
     pub fn carry_to(&mut self, tree: &horizon_world::Tree, eye: [f64; 3]) -> bool {
-        if self.coarsened.is_some() {
-            // Its levels were chosen by comparing plans at several coarsenings: plan again.
+        if self.coarsened.is_some() || self.skipped > 0 {
+            // Its levels were chosen by comparing plans at several coarsenings, or refinement
+            // went on past a refusal, which the decisions do not describe: plan again.
             return false;
         }
         let Some(refused) = self.decisions.holds(tree, eye) else {
