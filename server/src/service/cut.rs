@@ -131,7 +131,7 @@ pub const COARSENING_STEPS: u32 = 12;
 /// the power of 2 below times [`COARSENING_STEP`] at odd ones.
 pub fn coarsening_step(k: u32) -> f32 {
     let even = 2f32.powi((k / 2) as i32);
-    if k % 2 == 0 {
+    if k.is_multiple_of(2) {
         even
     } else {
         even * COARSENING_STEP
@@ -149,7 +149,7 @@ pub fn plan_with(
     let fine = plan_at(served, models, view, held, 1.0, None, true);
     let fixed = match coarsening {
         Coarsening::AsAsked => return fine,
-        Coarsening::Fixed(factor) if factor == 1.0 => return fine,
+        Coarsening::Fixed(1.0) => return fine,
         Coarsening::Fixed(factor) => Some(factor),
         Coarsening::Search => None,
     };
