@@ -156,7 +156,8 @@ pub struct Budgets {
     pub max_triangles: Option<u64>,
 }
 
-/// The budget that stopped a cut's refinement.
+/// The budget that stopped a cut's refinement, or that refused one of its refinements first
+/// ([`CutResponse::stopped_by`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[serde(rename_all = "snake_case")]
@@ -183,7 +184,9 @@ pub struct CutResponse {
     pub objects: u64,
     /// The entries, largest solid angle first.
     pub entries: Vec<Entry>,
-    /// The budget that stopped refinement, if one did.
+    /// `max_entries` if the entry budget stopped refinement; otherwise the byte, draw-call or
+    /// triangle budget that refused a refinement first (refinement went on past it with
+    /// smaller nodes); none if no budget refused one.
     pub stopped_by: Option<StoppedBy>,
 }
 

@@ -781,7 +781,7 @@ async fn refining_on_past_a_refusal_stays_within_the_budget_and_complete() {
     let table = AssetTable::default();
     table.refresh(&many).unwrap();
     let mut rng = horizon_mesh::rng::Rng::new(5);
-    let mut skips_seen = 0;
+    let (mut skips_seen, mut entry_stops) = (0, 0);
     for round in 0..40 {
         let mut view = View::at([
             -100.0 + 600.0 * rng.unit_f64(),
@@ -791,10 +791,14 @@ async fn refining_on_past_a_refusal_stays_within_the_budget_and_complete() {
         view.min_solid_angle = [1e-4, 1e-5, 1e-6][round % 3];
         view.instances = round % 2 == 0;
         let scale = 10f64.powf(2.0 * rng.unit_f64());
-        if round % 4 < 2 {
-            view.budgets.max_triangles = Some((2e3 * scale) as u64);
-        } else {
-            view.budgets.max_bytes = Some((2e5 * scale) as u64);
+        match round % 3 {
+            0 => view.budgets.max_triangles = Some((2e3 * scale) as u64),
+            1 => view.budgets.max_bytes = Some((2e5 * scale) as u64),
+            _ => view.budgets.max_draw_calls = Some((3.0 * scale) as u64),
+        }
+        // Sometimes the entry budget stops refinement after refusals were skipped.
+        if round % 5 == 0 {
+            view.budgets.max_entries = Some(60);
         }
         let p = many_state.plan(&view).unwrap();
         let entries = p.entries();
@@ -808,16 +812,21 @@ async fn refining_on_past_a_refusal_stays_within_the_budget_and_complete() {
             let triangles: u64 = p.entries().iter().map(|e| e.triangles).sum();
             triangles <= view.budgets.max_triangles.unwrap_or(u64::MAX)
                 && download(p) <= view.budgets.max_bytes.unwrap_or(u64::MAX)
+                && p.items.len() as u64 <= view.budgets.max_entries.unwrap_or(u64::MAX)
         };
         // Over only where even the coarsest cut is, which the plan that stops says too.
         let stops = many
             .with_served(|s| plan_stopping(s, &table, &view))
             .unwrap();
         assert!(within(&p) || !within(&stops), "{context}");
+        // A plan that skipped a refusal names a budget: the one that refused first, or the
+        // entry budget where that stopped refinement afterwards.
+        assert!(p.skipped == 0 || p.stopped_by.is_some(), "{context}");
         skips_seen += usize::from(p.skipped > 1);
+        entry_stops += usize::from(p.skipped > 0 && p.stopped_by == Some(StoppedBy::MaxEntries));
     }
     assert!(
-        skips_seen > 5,
-        "{skips_seen} plans skipped more than one refusal"
+        skips_seen > 5 && entry_stops > 0,
+        "{skips_seen} plans skipped more than one refusal, {entry_stops} then stopped by entries"
     );
 }

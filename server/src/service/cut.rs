@@ -10,8 +10,9 @@
 //! would exceed it. A refinement that would exceed the byte, draw-call or triangle budget is
 //! skipped, its node left in the cut, and refinement goes on with the next node, so the
 //! budget is filled by smaller nodes (measured against stopping there in
-//! `lab/results/levels.md`: never lower PSNR, up to 4.6 dB higher); `stopped_by` names the
-//! budget that refused first. Every refinement replaces a node by exactly its children, so
+//! `lab/results/levels.md`: never lower PSNR, up to 4.6 dB higher); `stopped_by` is
+//! `max_entries` where the entry budget stopped refinement, and otherwise the budget that
+//! refused a refinement first. Every refinement replaces a node by exactly its children, so
 //! every object of the generation is counted exactly once, by itself or by one ancestor: the
 //! cut is complete.
 //!
@@ -78,7 +79,7 @@ pub fn plan(served: &Served<'_>, models: &AssetTable, view: &View) -> Plan {
 /// a model the level its objects share there while that is fine enough and at most
 /// [`MODEL_LEVEL_SLACK`] finer than needed (`share_levels`).
 ///
-/// Levels are as the view asks also where a byte, draw-call or triangle budget stops
+/// Levels are as the view asks also where a byte, draw-call or triangle budget refuses
 /// refinement ([`Coarsening::AsAsked`]; why, in [`Coarsening::Search`]).
 pub fn plan_after(
     served: &Served<'_>,
@@ -94,7 +95,7 @@ pub fn plan_after(
 pub enum Coarsening {
     /// Levels as the view asks, whatever the budgets: what the service plans.
     AsAsked,
-    /// Levels as the view asks; where such a budget stops refinement, plan again with the
+    /// Levels as the view asks; where such a budget refuses a refinement, plan again with the
     /// objects that plan draws at their levels and every other object's chosen for pixels
     /// [`COARSENING_STEP`] times wider, then wider again up to [`MAX_COARSENING`], and keep
     /// the finest levels that refine as far as the coarsest do ([`search_coarsening`]).
@@ -170,12 +171,14 @@ pub fn plan_with(
     }
 }
 
-/// Whether a byte, draw-call or triangle budget stopped refinement.
+/// Whether a byte, draw-call or triangle budget refused a refinement: one was skipped, or
+/// (refinement stopping there, [`plan_stopping`]) it is the plan's `stopped_by`.
 fn binds(p: &Plan) -> bool {
-    matches!(
-        p.stopped_by,
-        Some(StoppedBy::MaxBytes | StoppedBy::MaxDrawCalls | StoppedBy::MaxTriangles)
-    )
+    p.skipped > 0
+        || matches!(
+            p.stopped_by,
+            Some(StoppedBy::MaxBytes | StoppedBy::MaxDrawCalls | StoppedBy::MaxTriangles)
+        )
 }
 
 /// The plan the issue asks for when a budget binds (issue 28: "coarser levels are chosen
@@ -290,7 +293,7 @@ pub struct Plan {
     pub objects: u64,
     /// The entries, in no particular order ([`Plan::entries`] sorts them).
     pub items: Vec<Planned>,
-    /// The budget that stopped refinement.
+    /// The budget that stopped refinement, or refused a refinement first (see the module docs).
     pub stopped_by: Option<StoppedBy>,
     /// Objects left out because their model is not in the [`AssetTable`] yet (refresh it
     /// and plan again).
@@ -322,6 +325,9 @@ pub struct Decisions {
     frontier: Vec<NodeId>,
     stopper: Option<NodeId>,
     over_at_seed: bool,
+    /// Refinement went on past a refusal ([`Plan::skipped`]): `refined` and `frontier` do not
+    /// say in which order refusals and refinements came, so the decisions never hold.
+    skipped: bool,
     /// A byte, draw-call or triangle budget: totals are not monotone along refinement, so
     /// the order of the refined nodes matters too.
     ordered: bool,
@@ -379,6 +385,9 @@ impl Decisions {
     /// over the entry budget too, with no other budget and no pending object: the cut is
     /// the same, and only the node named as refused changes.
     fn holds(&self, tree: &horizon_world::Tree, eye: [f64; 3]) -> Option<Option<usize>> {
+        if self.skipped {
+            return None;
+        }
         let hold = |yes: bool| yes.then_some(None);
         let eye = eye_of(eye);
         let bvh = &tree.bvh;
@@ -1718,6 +1727,7 @@ impl<'a> Planner<'a> {
             frontier: std::mem::take(&mut self.frontier),
             stopper: self.stopper,
             over_at_seed: self.over_at_seed,
+            skipped: self.skipped > 0,
             ordered: bounds_costs(b),
             entries: self.refined_entries,
             max_entries: b.max_entries,

@@ -469,8 +469,9 @@ async fn write(
         };
         let message = match delta {
             Some((add, remove)) => {
-                if add.is_empty() && remove.is_empty() {
-                    // The cut did not change: nothing to send.
+                let same_stop = before.as_ref().map(|b| b.stopped_by) == Some(plan.stopped_by);
+                if add.is_empty() && remove.is_empty() && same_stop {
+                    // The cut did not change, nor what stopped it: nothing to send.
                     held = Some(plan);
                     metrics::counter!("horizon_stream_unchanged_total").increment(1);
                     continue;
