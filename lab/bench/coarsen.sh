@@ -23,15 +23,10 @@ H=${H:-target/release/horizon}
 L=${L:-target/release/horizon-lab}
 DISTINCT=${DISTINCT:-2000}
 mkdir -p "$OUT" "$WORK"
+source "$(dirname "${BASH_SOURCE[0]}")/lib.sh"
 for world in city city-distinct; do
   dir="$WORK/$world"
-  if [ ! -f "$dir/world.db" ]; then
-    if [ "$world" = city-distinct ]; then
-      "$L" gen world "$world" "$dir" --seed 1 --objects "$DISTINCT" > /dev/null
-    else
-      "$L" gen world "$world" "$dir" --seed 1 > /dev/null
-    fi
-  fi
+  generate "$world" "$dir"
   if [ ! -f "$dir/.built" ]; then
     "$H" build "$dir" > "$WORK/build_$world.txt"
     touch "$dir/.built"

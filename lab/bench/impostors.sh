@@ -29,15 +29,10 @@ DISTINCT=${DISTINCT:-2000}
 NODES=${NODES:-8}
 WORLDS=${WORLDS:-village city city-distinct}
 mkdir -p "$OUT" "$WORK"
+source "$(dirname "${BASH_SOURCE[0]}")/lib.sh"
 for world in $WORLDS; do
   dir="$WORK/$world"
-  if [ ! -f "$dir/world.db" ]; then
-    if [ "$world" = city-distinct ]; then
-      "$L" gen world "$world" "$dir" --seed 1 --objects "$DISTINCT" > /dev/null
-    else
-      "$L" gen world "$world" "$dir" --seed 1 > /dev/null
-    fi
-  fi
+  generate "$world" "$dir"
   if [ ! -f "$dir/.built" ]; then
     /usr/bin/time -v "$H" build "$dir" > "$OUT/build_$world.txt" 2> "$WORK/build_$world.time"
     grep -E "Elapsed|Maximum resident" "$WORK/build_$world.time" >> "$OUT/build_$world.txt"
@@ -84,7 +79,6 @@ EOF
 done
 
 # The walks, each world served on its own.
-source "$(dirname "${BASH_SOURCE[0]}")/lib.sh"
 trap stop EXIT
 for world in $WORLDS; do
   dir="$WORK/$world"

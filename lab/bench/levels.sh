@@ -19,15 +19,10 @@ H=${H:-target/release/horizon}
 L=${L:-target/release/horizon-lab}
 DISTINCT=${DISTINCT:-2000}
 mkdir -p "$OUT" "$WORK"
+source "$(dirname "${BASH_SOURCE[0]}")/lib.sh"
 for world in village city city-distinct; do
   dir="$WORK/$world"
-  if [ ! -f "$dir/world.db" ]; then
-    if [ "$world" = city-distinct ]; then
-      "$L" gen world "$world" "$dir" --seed 1 --objects "$DISTINCT" > /dev/null
-    else
-      "$L" gen world "$world" "$dir" --seed 1 > /dev/null
-    fi
-  fi
+  generate "$world" "$dir"
   if [ ! -f "$dir/.built" ]; then
     /usr/bin/time -v "$H" build "$dir" > "$OUT/build_$world.txt" 2> "$WORK/build_$world.time"
     grep -E "Elapsed|Maximum resident" "$WORK/build_$world.time" >> "$OUT/build_$world.txt"

@@ -1,9 +1,23 @@
-# Shared by the lab's shell benchmarks (source it). Serving a world on a free port:
+# Shared by the lab's shell benchmarks (source it).
+# Generating a world once:
+#   generate WORLD DIR `$L gen world WORLD DIR --seed 1` unless DIR holds a world already;
+#                      city-distinct with `--objects $DISTINCT`
+# Serving a world on a free port:
 #   serve DIR [LOGS]   starts `$H serve DIR`, waits for the URL it prints, and sets $pid and
 #                      $url; its stdout and log go to LOGS (default $work)
 #   stop               ends it (nothing if none runs)
-# A script sets H, and calls `stop` from its EXIT trap.
+# A script sets L (to generate) or H (to serve), and calls `stop` from its EXIT trap.
 pid=
+
+generate() {
+  local world=$1 dir=$2
+  [ -f "$dir/world.db" ] && return 0
+  if [ "$world" = city-distinct ]; then
+    "$L" gen world "$world" "$dir" --seed 1 --objects "$DISTINCT" > /dev/null
+  else
+    "$L" gen world "$world" "$dir" --seed 1 > /dev/null
+  fi
+}
 
 serve() {
   local logs=${2:-$work}
