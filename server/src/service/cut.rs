@@ -254,7 +254,7 @@ fn plan_at(
     skip_refused: bool,
 ) -> Plan {
     let mut planner = Planner::new(served, models, view);
-    planner.skip_refused = skip_refused && bounds_costs(&planner.budgets);
+    planner.skip_refused = skip_refused;
     planner.level_pixel_angle = planner.pixel_angle * coarsening;
     if let Some(keep) = keep {
         for (slot, &level) in planner.chosen.iter().zip(keep) {

@@ -35,11 +35,11 @@ impl Plan {
     /// of such a budget ([`Plan::skipped`]) or whose levels were coarsened because one bound
     /// ([`Plan::coarsened`]) always does.
     pub fn carry_to(&mut self, tree: &horizon_world::Tree, eye: [f64; 3]) -> bool {
-        if self.coarsened.is_some() || self.skipped > 0 {
-            // Its levels were chosen by comparing plans at several coarsenings, or refinement
-            // went on past a refusal, which the decisions do not describe: plan again.
+        if self.coarsened.is_some() {
+            // Its levels were chosen by comparing plans at several coarsenings: plan again.
             return false;
         }
+        // Decisions that went on past a refusal never hold (`Decisions::holds`).
         let Some(refused) = self.decisions.holds(tree, eye) else {
             return false;
         };
