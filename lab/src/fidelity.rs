@@ -161,7 +161,7 @@ pub struct ViewReport {
     pub coarsened_cut: Option<FlatReport>,
     /// The same cut stopped at the first refusal, with `--stop-peer`.
     pub stopped_cut: Option<FlatReport>,
-    /// Refusals the service's cut went on past, with `--stop-peer`.
+    /// Refusals the service's cut went on past.
     pub skipped: usize,
     /// How many times wider than the image's pixel its levels were chosen for, where a
     /// budget bound (`Plan::coarsened`).
@@ -335,7 +335,12 @@ pub fn measure(args: &Args) -> anyhow::Result<Report> {
             max_triangles: args.max_triangles,
             max_bytes: args.max_bytes,
         };
-        let (cut_entries, plan_ms) = timed_plan(&world, &table, &view)?;
+        let ((cut_entries, skipped), plan_ms) = timed(|| {
+            world.with_served(|s| {
+                let p = plan(s, &table, &view);
+                (p.entries(), p.skipped)
+            })
+        })?;
         let (plain_entries, plain_plan_ms) = if args.instances_peer {
             let plain = View {
                 instances: false,
@@ -356,6 +361,7 @@ pub fn measure(args: &Args) -> anyhow::Result<Report> {
             &object_boxes,
         )?;
         costs.plan_ms = plan_ms;
+        costs.skipped = skipped;
         costs.plan_ms_without_instances = plain_plan_ms;
         let Some(full_scene) = &full_scene else {
             costs.aggregates_only = plain_entries.map(|e| FlatReport {
@@ -413,7 +419,6 @@ pub fn measure(args: &Args) -> anyhow::Result<Report> {
             None
         };
         let stopped_cut = if args.stop_peer {
-            costs.skipped = world.with_served(|s| plan(s, &table, &view).skipped)?;
             let (entries, ms) =
                 timed(|| world.with_served(|s| plan_stopping(s, &table, &view).entries()))?;
             costs.plan_ms_stopping = Some(ms);
