@@ -51,17 +51,6 @@ const MODELS: usize = 3;
 /// `MODELS` distinct buildings, each placed `ROW` times along +x from 20 m to about 3 km
 /// (spacing growing by 13% a step), levelled and aggregated.
 fn world(name: &str) -> (TempDir, Arc<World>) {
-    let dir = std::env::temp_dir().join(format!("horizon-levels-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    let dir = TempDir(dir);
-    let models: Vec<(String, horizon_mesh::InstancedMesh)> = (0..MODELS)
-        .map(|i| {
-            (
-                format!("building-{i}"),
-                horizon_worldgen::distinct_building(1, i).unwrap(),
-            )
-        })
-        .collect();
     let mut objects = Vec::new();
     for m in 0..MODELS {
         for k in 0..ROW {
@@ -70,39 +59,43 @@ fn world(name: &str) -> (TempDir, Arc<World>) {
             objects.push((m, Affine3A::from_translation(Vec3::new(x, 0.0, z))));
         }
     }
-    let world = World::create(&dir.0, name, 1, &models, &objects).unwrap();
-    let (levelled, failures) = world.level_models(&|_, _| {}).unwrap();
-    assert_eq!(levelled, MODELS);
-    assert!(failures.is_empty(), "{failures:?}");
-    world
-        .rebuild_aggregates(AggregateOptions::default(), &|_| {})
-        .unwrap();
-    (dir, Arc::new(world))
+    built(name, 1, MODELS, &objects)
 }
 
 /// `n` distinct buildings, one of each, along +x from 20 m (spacing growing by 25% a step):
 /// a world whose cut's bytes are its objects' own, levelled and aggregated.
 fn distinct_row(name: &str, n: usize) -> (TempDir, Arc<World>) {
-    let dir = std::env::temp_dir().join(format!("horizon-levels-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    let dir = TempDir(dir);
-    let models: Vec<(String, horizon_mesh::InstancedMesh)> = (0..n)
-        .map(|i| {
-            (
-                format!("building-{i}"),
-                horizon_worldgen::distinct_building(3, i).unwrap(),
-            )
-        })
-        .collect();
     let objects: Vec<(usize, Affine3A)> = (0..n)
         .map(|k| {
             let x = 20.0 * 1.25f32.powi(k as i32);
             (k, Affine3A::from_translation(Vec3::new(x, 0.0, 0.0)))
         })
         .collect();
-    let world = World::create(&dir.0, name, 1, &models, &objects).unwrap();
+    built(name, 3, n, &objects)
+}
+
+/// A world of `models` distinct buildings (`distinct_building(seed, i)`) placed as `objects`
+/// say, every model levelled (asserted) and the aggregates published.
+fn built(
+    name: &str,
+    seed: u64,
+    models: usize,
+    objects: &[(usize, Affine3A)],
+) -> (TempDir, Arc<World>) {
+    let dir = std::env::temp_dir().join(format!("horizon-levels-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let dir = TempDir(dir);
+    let buildings: Vec<(String, horizon_mesh::InstancedMesh)> = (0..models)
+        .map(|i| {
+            (
+                format!("building-{i}"),
+                horizon_worldgen::distinct_building(seed, i).unwrap(),
+            )
+        })
+        .collect();
+    let world = World::create(&dir.0, name, 1, &buildings, objects).unwrap();
     let (levelled, failures) = world.level_models(&|_, _| {}).unwrap();
-    assert_eq!(levelled, n);
+    assert_eq!(levelled, models);
     assert!(failures.is_empty(), "{failures:?}");
     world
         .rebuild_aggregates(AggregateOptions::default(), &|_| {})
