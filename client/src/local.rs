@@ -118,11 +118,32 @@ impl LocalCut {
                         }
                     }
                 }
+                // An addition that reuses a held entry's placements takes them before the
+                // removals: it must name one it replaces, held before the delta.
+                let mut entries = Vec::with_capacity(add.len());
+                for a in add {
+                    let mut entry = a.entry.clone();
+                    if let Some(reuse) = &a.reuses {
+                        let held = self
+                            .entries
+                            .get(&reuse.entry)
+                            .filter(|_| a.replaces.contains(&reuse.entry))
+                            .filter(|_| a.entry.placements.is_empty());
+                        let Some(held) = held else {
+                            return Err(ApplyError::ReusesUnknown {
+                                entry: a.entry.id.clone(),
+                                reuses: reuse.entry.clone(),
+                            });
+                        };
+                        entry.placements = reuse.placements(&held.placements);
+                    }
+                    entries.push(entry);
+                }
                 for r in remove {
                     self.entries.remove(&r.id);
                 }
-                for a in add {
-                    self.entries.insert(a.entry.id.clone(), a.entry.clone());
+                for entry in entries {
+                    self.entries.insert(entry.id.clone(), entry);
                 }
                 self.set_header(*seq, *view, *generation, *published, *objects, *stopped_by);
                 Ok(())
@@ -406,6 +427,15 @@ pub enum ApplyError {
         /// The id it names in `replaces`.
         replaces: String,
     },
+    /// An addition reuses the placements of an entry that was not held before the delta, that
+    /// it does not replace, or while sending placements of its own.
+    #[error("{entry} reuses the placements of {reuses}, which it cannot")]
+    ReusesUnknown {
+        /// The added entry.
+        entry: String,
+        /// The id it names in `reuses`.
+        reuses: String,
+    },
 }
 
 /// A cut that does not count every object exactly once.
@@ -545,6 +575,7 @@ mod tests {
         Addition {
             entry: e,
             replaces: replaces.iter().map(|s| (*s).to_owned()).collect(),
+            reuses: None,
         }
     }
 
@@ -642,6 +673,53 @@ mod tests {
         ))
         .expect("delta");
         assert_eq!(cut.get("o:7@2"), Some(&moved));
+    }
+
+    #[test]
+    fn an_addition_reusing_held_placements_takes_them_renamed_and_refuses_otherwise() {
+        let placed = |asset: &str, x: f32| Placement {
+            asset: asset.to_owned(),
+            matrix: [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, x, 0.0, 0.0],
+        };
+        let mut held = entry("n:4@i1/a", 3);
+        held.placements = vec![placed("m0", 1.0), placed("m1", 2.0), placed("m0", 3.0)];
+        let mut cut = LocalCut::new();
+        cut.apply(&reset(1, vec![held, entry("o:7@2", 1)]))
+            .expect("reset");
+        // The same objects with model m0 at another level: its placements, renamed.
+        let relevel = |seq: u64, reuses: &str, replaces: &[&str]| {
+            let mut a = add(entry("n:4@i1/b", 3), replaces);
+            a.entry.placements = Vec::new();
+            a.reuses = Some(horizon_protocol::Reuse {
+                entry: reuses.to_owned(),
+                assets: vec![["m0".to_owned(), "m0-level-1".to_owned()]],
+            });
+            delta(seq, 4, vec![a], vec![remove("n:4@i1/a")])
+        };
+        for bad in [
+            relevel(2, "o:7@2", &["n:4@i1/a"]),
+            relevel(2, "n:4@i1/a", &[]),
+        ] {
+            let before = cut.clone();
+            let e = cut
+                .apply(&bad)
+                .expect_err("reuses what it does not replace");
+            assert!(matches!(e, ApplyError::ReusesUnknown { .. }), "{e}");
+            assert_eq!(cut, before);
+        }
+        cut.apply(&relevel(2, "n:4@i1/a", &["n:4@i1/a"]))
+            .expect("a relevel");
+        let got = cut.get("n:4@i1/b").expect("the new entry");
+        assert_eq!(
+            got.placements,
+            vec![
+                placed("m0-level-1", 1.0),
+                placed("m1", 2.0),
+                placed("m0-level-1", 3.0)
+            ]
+        );
+        assert!(cut.get("n:4@i1/a").is_none());
+        cut.check_complete().expect("complete");
     }
 
     #[test]

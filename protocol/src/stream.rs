@@ -9,7 +9,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::cut::{Entry, View};
+use crate::cut::{Entry, Placement, View};
 use crate::error::ErrorDetail;
 
 /// A message from the client.
@@ -64,6 +64,39 @@ pub struct Addition {
     /// Ids of removed entries that drew what this one draws.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub replaces: Vec<String>,
+    /// Set when the entry's `placements` are sent empty because they are those of an entry
+    /// the client holds, with some assets renamed: instances whose models moved to other
+    /// levels of detail, every other placement as it was ([`Reuse::placements`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reuses: Option<Reuse>,
+}
+
+/// The placements of an entry the client holds before the delta, taken over by an addition
+/// with each asset named in `assets` renamed: what an instances entry sends when only the
+/// levels of detail of its models changed, instead of every placement again.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Reuse {
+    /// The held entry whose placements the addition takes (one it replaces).
+    pub entry: String,
+    /// Pairs of asset hashes: each placement of the first is a placement of the second.
+    pub assets: Vec<[String; 2]>,
+}
+
+impl Reuse {
+    /// The addition's placements: `held`'s (the placements of [`Reuse::entry`]), in order,
+    /// each asset renamed by [`Reuse::assets`].
+    pub fn placements(&self, held: &[Placement]) -> Vec<Placement> {
+        held.iter()
+            .map(|p| Placement {
+                asset: self
+                    .assets
+                    .iter()
+                    .find(|[from, _]| *from == p.asset)
+                    .map_or_else(|| p.asset.clone(), |[_, to]| to.clone()),
+                matrix: p.matrix,
+            })
+            .collect()
+    }
 }
 
 /// A message from the server.

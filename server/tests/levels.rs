@@ -511,6 +511,70 @@ async fn a_plan_carried_to_a_new_eye_is_the_plan_planning_again_makes() {
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_instances_entry_whose_models_moved_level_reuses_the_placements_held() {
+    let (_dir, world) = world("reuse");
+    let state = state(&world);
+    let mut rng = horizon_mesh::rng::Rng::new(5);
+    let (mut reused, mut renamed, mut sent_whole) = (0, 0, 0);
+    for walk in 0..8 {
+        let mut view = View::at([
+            -100.0 + 600.0 * rng.unit_f64(),
+            2.0 + 40.0 * rng.unit_f64(),
+            -60.0 + 200.0 * rng.unit_f64(),
+        ]);
+        view.min_solid_angle = [0.001, 0.0001][walk % 2];
+        let mut held = state.plan(&view).unwrap();
+        for _ in 0..30 {
+            let dir = rng.unit_vector();
+            let step = 0.5 * 100f64.powf(rng.unit_f64());
+            for i in 0..3 {
+                view.eye[i] += f64::from(dir[i]) * step;
+            }
+            view.eye[1] = view.eye[1].max(1.0);
+            let again = state.plan_after(&view, Some(&held)).unwrap();
+            let (add, _) = world
+                .with_served(|served| again.diff(&held, served))
+                .unwrap();
+            let before: HashMap<String, horizon_protocol::Entry> = held
+                .entries()
+                .into_iter()
+                .map(|e| (e.id.clone(), e))
+                .collect();
+            let after: HashMap<String, horizon_protocol::Entry> = again
+                .entries()
+                .into_iter()
+                .map(|e| (e.id.clone(), e))
+                .collect();
+            for a in add {
+                let whole = &after[&a.entry.id];
+                let Some(reuse) = &a.reuses else {
+                    if whole.kind == EntryKind::Instances {
+                        sent_whole += 1;
+                    }
+                    assert_eq!(&a.entry, whole, "walk {walk}");
+                    continue;
+                };
+                // What a client makes of it: the held entry's placements, renamed.
+                assert!(a.entry.placements.is_empty() && a.replaces.contains(&reuse.entry));
+                let mut made = a.entry.clone();
+                made.placements = reuse.placements(&before[&reuse.entry].placements);
+                assert_eq!(
+                    &made, whole,
+                    "walk {walk}: {} reusing {}",
+                    whole.id, reuse.entry
+                );
+                reused += 1;
+                renamed += usize::from(!reuse.assets.is_empty());
+            }
+            held = again;
+        }
+    }
+    let counts = format!("reused {reused} ({renamed} renaming), sent whole {sent_whole}");
+    assert!(reused > 5 && renamed > 5, "{counts}");
+    eprintln!("{counts}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_plan_at_the_edge_of_a_budget_is_never_carried_into_another_cut() {
     let (_dir, world) = world("edge");
     let state = state(&world);

@@ -68,7 +68,7 @@ export class World {
   /** A delta: additions load; removals retire until what replaces them has loaded. */
   applyDelta(message) {
     this.header(message);
-    const added = message.add.map((data) => this.add(data, data.replaces || []));
+    const added = message.add.map((data) => this.add(this.withPlacements(data), data.replaces || []));
     // An id both removed and added is the same content with new counts (an aggregate whose
     // `covers` changed when an object went pending): it was updated in place.
     const again = new Set(message.add.map((a) => a.id));
@@ -93,6 +93,20 @@ export class World {
       }
     }
     this.settle();
+  }
+
+  /**
+   * An addition's data with its placements: those it sent, or, where it `reuses` a held
+   * entry's (instances whose models moved to other levels), that entry's with the named assets
+   * renamed.
+   */
+  withPlacements(data) {
+    if (!data.reuses) return data;
+    const held = this.entries.get(data.reuses.entry);
+    if (!held) throw new Error(`${data.id} reuses the placements of ${data.reuses.entry}, which is not held`);
+    const renamed = new Map(data.reuses.assets);
+    const placements = held.data.placements.map((p) => ({ asset: renamed.get(p.asset) ?? p.asset, matrix: p.matrix }));
+    return { ...data, placements };
   }
 
   header(message) {

@@ -61,7 +61,7 @@ use horizon_aggregate::AggregateManifest;
 use horizon_bvh::{solid_angle, worst_case_solid_angle, NodeId, ObjectId};
 use horizon_protocol::{
     Addition, Asset, AssetRole, Budgets, Entry, EntryKind, Impostor, ImpostorView, Placement,
-    Removal, RemoveReason, StoppedBy, View, DEFAULT_MAX_ENTRIES,
+    Removal, RemoveReason, Reuse, StoppedBy, View, DEFAULT_MAX_ENTRIES,
 };
 use horizon_world::{Served, World, WorldError};
 
@@ -2544,6 +2544,8 @@ impl Plan {
             .filter_map(|(i, p)| p.node().map(|n| (n, i)))
             .collect();
         let mut replaces: Vec<Vec<String>> = vec![Vec::new(); fresh.len()];
+        // The held instances entry of the same node and objects each fresh one may reuse.
+        let mut reusable: Vec<Option<&Planned>> = vec![None; fresh.len()];
         let mut removals = Vec::with_capacity(gone.len());
         for p in &gone {
             let id = before.id(p);
@@ -2554,6 +2556,13 @@ impl Plan {
             {
                 // The same node or object, in a new version or at another level of detail.
                 replaces[i].push(id.clone());
+                if let (Key::Instances { content: a, .. }, Key::Instances { content: b, .. }) =
+                    (p.key, fresh[i].key)
+                {
+                    if a == b {
+                        reusable[i] = Some(p);
+                    }
+                }
                 match (p.key, fresh[i].key) {
                     (
                         Key::Object {
@@ -2606,13 +2615,45 @@ impl Plan {
         let additions = fresh
             .iter()
             .zip(replaces)
-            .map(|(p, replaces)| Addition {
-                entry: self.entry(p),
-                replaces,
+            .zip(reusable)
+            .map(|((p, replaces), reusable)| {
+                let mut entry = self.entry(p);
+                let reuses = reusable.and_then(|held| reuse(&before.entry(held), &mut entry));
+                Addition {
+                    entry,
+                    replaces,
+                    reuses,
+                }
             })
             .collect();
         (additions, removals)
     }
+}
+
+/// Sends `entry`'s placements as `held`'s renamed, where they are: the same number, each at
+/// the same place, and each asset of `held` becoming one asset of `entry` wherever it is
+/// drawn (instances whose models changed level). Empties `entry.placements` then.
+fn reuse(held: &Entry, entry: &mut Entry) -> Option<Reuse> {
+    if held.placements.len() != entry.placements.len() || entry.placements.is_empty() {
+        return None;
+    }
+    let mut assets: Vec<[String; 2]> = Vec::new();
+    for (from, to) in held.placements.iter().zip(&entry.placements) {
+        if from.matrix != to.matrix {
+            return None;
+        }
+        match assets.iter().find(|[a, _]| *a == from.asset) {
+            Some([_, b]) if *b != to.asset => return None,
+            Some(_) => {}
+            None => assets.push([from.asset.clone(), to.asset.clone()]),
+        }
+    }
+    assets.retain(|[a, b]| a != b);
+    entry.placements = Vec::new();
+    Some(Reuse {
+        entry: held.id.clone(),
+        assets,
+    })
 }
 
 #[cfg(test)]
