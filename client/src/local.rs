@@ -118,8 +118,8 @@ impl LocalCut {
                         }
                     }
                 }
-                // An addition that reuses a held entry's placements takes them before the
-                // removals: it must name one it replaces, held before the delta.
+                // An addition that reuses a held entry's assets and placements takes them
+                // before the removals: it must name one it replaces, held before the delta.
                 let mut entries = Vec::with_capacity(add.len());
                 for a in add {
                     let mut entry = a.entry.clone();
@@ -128,14 +128,14 @@ impl LocalCut {
                             .entries
                             .get(&reuse.entry)
                             .filter(|_| a.replaces.contains(&reuse.entry))
-                            .filter(|_| a.entry.placements.is_empty());
+                            .filter(|_| a.entry.assets.is_empty() && a.entry.placements.is_empty());
                         let Some(held) = held else {
                             return Err(ApplyError::ReusesUnknown {
                                 entry: a.entry.id.clone(),
                                 reuses: reuse.entry.clone(),
                             });
                         };
-                        entry.placements = reuse.placements(&held.placements);
+                        reuse.fill(held, &mut entry);
                     }
                     entries.push(entry);
                 }
@@ -427,9 +427,9 @@ pub enum ApplyError {
         /// The id it names in `replaces`.
         replaces: String,
     },
-    /// An addition reuses the placements of an entry that was not held before the delta, that
-    /// it does not replace, or while sending placements of its own.
-    #[error("{entry} reuses the placements of {reuses}, which it cannot")]
+    /// An addition reuses the assets and placements of an entry that was not held before the
+    /// delta, that it does not replace, or while sending assets or placements of its own.
+    #[error("{entry} reuses the assets and placements of {reuses}, which it cannot")]
     ReusesUnknown {
         /// The added entry.
         entry: String,
@@ -681,7 +681,13 @@ mod tests {
             asset: asset.to_owned(),
             matrix: [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, x, 0.0, 0.0],
         };
+        let asset = |hash: &str, bytes: u64| Asset {
+            hash: hash.to_owned(),
+            bytes,
+            role: AssetRole::Model,
+        };
         let mut held = entry("n:4@i1/a", 3);
+        held.assets = vec![asset("m0", 100), asset("m1", 50)];
         held.placements = vec![placed("m0", 1.0), placed("m1", 2.0), placed("m0", 3.0)];
         let mut cut = LocalCut::new();
         cut.apply(&reset(1, vec![held, entry("o:7@2", 1)]))
@@ -689,10 +695,15 @@ mod tests {
         // The same objects with model m0 at another level: its placements, renamed.
         let relevel = |seq: u64, reuses: &str, replaces: &[&str]| {
             let mut a = add(entry("n:4@i1/b", 3), replaces);
+            a.entry.assets = Vec::new();
             a.entry.placements = Vec::new();
             a.reuses = Some(horizon_protocol::Reuse {
                 entry: reuses.to_owned(),
-                assets: vec![["m0".to_owned(), "m0-level-1".to_owned()]],
+                assets: vec![horizon_protocol::Renamed {
+                    from: "m0".to_owned(),
+                    to: "m0-level-1".to_owned(),
+                    bytes: 30,
+                }],
             });
             delta(seq, 4, vec![a], vec![remove("n:4@i1/a")])
         };
@@ -710,6 +721,7 @@ mod tests {
         cut.apply(&relevel(2, "n:4@i1/a", &["n:4@i1/a"]))
             .expect("a relevel");
         let got = cut.get("n:4@i1/b").expect("the new entry");
+        assert_eq!(got.assets, vec![asset("m0-level-1", 30), asset("m1", 50)]);
         assert_eq!(
             got.placements,
             vec![

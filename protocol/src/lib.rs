@@ -29,7 +29,7 @@ pub use objects::{
     BatchOp, BatchRequest, BatchResponse, Created, Deleted, NewObject, ObjectInfo, ObjectPage,
     ObjectPatch, Scale,
 };
-pub use stream::{Addition, ClientMessage, Removal, RemoveReason, Reuse, ServerMessage};
+pub use stream::{Addition, ClientMessage, Removal, RemoveReason, Renamed, Reuse, ServerMessage};
 pub use world::{Bounds, WorldInfo};
 
 /// The default size of a page of `GET /v1/objects` and `GET /v1/models`.

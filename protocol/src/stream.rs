@@ -9,7 +9,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::cut::{Entry, Placement, View};
+use crate::cut::{Asset, Entry, Placement, View};
 use crate::error::ErrorDetail;
 
 /// A message from the client.
@@ -64,38 +64,61 @@ pub struct Addition {
     /// Ids of removed entries that drew what this one draws.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub replaces: Vec<String>,
-    /// Set when the entry's `placements` are sent empty because they are those of an entry
-    /// the client holds, with some assets renamed: instances whose models moved to other
-    /// levels of detail, every other placement as it was ([`Reuse::placements`]).
+    /// Set when the entry's `assets` and `placements` are sent empty because they are those of
+    /// an entry the client holds with some assets renamed: instances whose models moved to
+    /// other levels of detail, every other asset and placement as it was ([`Reuse::fill`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub reuses: Option<Reuse>,
 }
 
-/// The placements of an entry the client holds before the delta, taken over by an addition
-/// with each asset named in `assets` renamed: what an instances entry sends when only the
-/// levels of detail of its models changed, instead of every placement again.
+/// The assets and placements of an entry the client holds before the delta, taken over by an
+/// addition with the assets named in `assets` renamed: what an instances entry sends when only
+/// the levels of detail of its models changed, instead of every asset and placement again.
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Reuse {
-    /// The held entry whose placements the addition takes (one it replaces).
+    /// The held entry whose assets and placements the addition takes (one it replaces).
     pub entry: String,
-    /// Pairs of asset hashes: each placement of the first is a placement of the second.
-    pub assets: Vec<[String; 2]>,
+    /// The assets renamed; every other asset stays as it was.
+    pub assets: Vec<Renamed>,
+}
+
+/// One asset of a held entry becoming another: each of its placements, and its place in the
+/// entry's `assets`, are the new asset's.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Renamed {
+    /// The held asset's hash.
+    pub from: String,
+    /// The new asset's hash.
+    pub to: String,
+    /// The new asset's bytes.
+    pub bytes: u64,
 }
 
 impl Reuse {
-    /// The addition's placements: `held`'s (the placements of [`Reuse::entry`]), in order,
-    /// each asset renamed by [`Reuse::assets`].
-    pub fn placements(&self, held: &[Placement]) -> Vec<Placement> {
-        held.iter()
+    /// Gives `entry` the assets and placements of `held` (the entry [`Reuse::entry`] names),
+    /// in order, each asset named in [`Reuse::assets`] renamed.
+    pub fn fill(&self, held: &Entry, entry: &mut Entry) {
+        let renamed = |hash: &str| self.assets.iter().find(|r| r.from == hash);
+        entry.assets = held
+            .assets
+            .iter()
+            .map(|a| match renamed(&a.hash) {
+                Some(r) => Asset {
+                    hash: r.to.clone(),
+                    bytes: r.bytes,
+                    role: a.role,
+                },
+                None => a.clone(),
+            })
+            .collect();
+        entry.placements = held
+            .placements
+            .iter()
             .map(|p| Placement {
-                asset: self
-                    .assets
-                    .iter()
-                    .find(|[from, _]| *from == p.asset)
-                    .map_or_else(|| p.asset.clone(), |[_, to]| to.clone()),
+                asset: renamed(&p.asset).map_or_else(|| p.asset.clone(), |r| r.to.clone()),
                 matrix: p.matrix,
             })
-            .collect()
+            .collect();
     }
 }
 
@@ -161,6 +184,38 @@ impl ServerMessage {
 mod tests {
     use super::*;
     use crate::cut::Budgets;
+
+    #[test]
+    fn an_addition_reusing_a_held_entry_names_it_and_the_assets_renamed() {
+        let wire = r#"{"id": "n:4@i1/b", "kind": "instances", "assets": [], "placements": [],
+            "level": 0, "bytes": 80, "triangles": 12, "draw_calls": 2, "center": [0, 0, 0],
+            "radius": 5, "covers": 3, "replaces": ["n:4@i1/a"],
+            "reuses": {"entry": "n:4@i1/a", "assets": [{"from": "m0", "to": "m0b", "bytes": 30}]}}"#;
+        let a: Addition = serde_json::from_str(wire).expect("parse");
+        let reuse = a.reuses.clone().expect("reuses");
+        let again: Addition =
+            serde_json::from_str(&serde_json::to_string(&a).expect("json")).expect("parse");
+        assert_eq!(again, a);
+        let asset = |hash: &str, bytes: u64| Asset {
+            hash: hash.into(),
+            bytes,
+            role: crate::cut::AssetRole::Model,
+        };
+        let at = |hash: &str, x: f32| Placement {
+            asset: hash.into(),
+            matrix: [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, x, 0.0, 0.0],
+        };
+        let mut held = a.entry.clone();
+        held.assets = vec![asset("m0", 100), asset("m1", 50)];
+        held.placements = vec![at("m1", 1.0), at("m0", 2.0), at("m0", 3.0)];
+        let mut entry = a.entry;
+        reuse.fill(&held, &mut entry);
+        assert_eq!(entry.assets, vec![asset("m0b", 30), asset("m1", 50)]);
+        assert_eq!(
+            entry.placements,
+            vec![at("m1", 1.0), at("m0b", 2.0), at("m0b", 3.0)]
+        );
+    }
 
     #[test]
     fn a_view_message_parses_with_defaults_and_checks() {

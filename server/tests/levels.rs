@@ -554,10 +554,11 @@ async fn an_instances_entry_whose_models_moved_level_reuses_the_placements_held(
                     assert_eq!(&a.entry, whole, "walk {walk}");
                     continue;
                 };
-                // What a client makes of it: the held entry's placements, renamed.
-                assert!(a.entry.placements.is_empty() && a.replaces.contains(&reuse.entry));
+                // What a client makes of it: the held entry's assets and placements, renamed.
+                assert!(a.entry.assets.is_empty() && a.entry.placements.is_empty());
+                assert!(a.replaces.contains(&reuse.entry));
                 let mut made = a.entry.clone();
-                made.placements = reuse.placements(&before[&reuse.entry].placements);
+                reuse.fill(&before[&reuse.entry], &mut made);
                 assert_eq!(
                     &made, whole,
                     "walk {walk}: {} reusing {}",

@@ -96,17 +96,21 @@ export class World {
   }
 
   /**
-   * An addition's data with its placements: those it sent, or, where it `reuses` a held
-   * entry's (instances whose models moved to other levels), that entry's with the named assets
-   * renamed.
+   * An addition's data with its assets and placements: those it sent, or, where it `reuses` a
+   * held entry's (instances whose models moved to other levels), that entry's with the named
+   * assets renamed.
    */
   withPlacements(data) {
     if (!data.reuses) return data;
     const held = this.entries.get(data.reuses.entry);
     if (!held) throw new Error(`${data.id} reuses the placements of ${data.reuses.entry}, which is not held`);
-    const renamed = new Map(data.reuses.assets);
-    const placements = held.data.placements.map((p) => ({ asset: renamed.get(p.asset) ?? p.asset, matrix: p.matrix }));
-    return { ...data, placements };
+    const renamed = new Map(data.reuses.assets.map((r) => [r.from, r]));
+    const assets = held.data.assets.map((a) => {
+      const r = renamed.get(a.hash);
+      return r ? { ...a, hash: r.to, bytes: r.bytes } : a;
+    });
+    const placements = held.data.placements.map((p) => ({ asset: renamed.get(p.asset)?.to ?? p.asset, matrix: p.matrix }));
+    return { ...data, assets, placements };
   }
 
   header(message) {

@@ -61,7 +61,7 @@ use horizon_aggregate::AggregateManifest;
 use horizon_bvh::{solid_angle, worst_case_solid_angle, NodeId, ObjectId};
 use horizon_protocol::{
     Addition, Asset, AssetRole, Budgets, Entry, EntryKind, Impostor, ImpostorView, Placement,
-    Removal, RemoveReason, Reuse, StoppedBy, View, DEFAULT_MAX_ENTRIES,
+    Removal, RemoveReason, Renamed, Reuse, StoppedBy, View, DEFAULT_MAX_ENTRIES,
 };
 use horizon_world::{Served, World, WorldError};
 
@@ -2630,30 +2630,38 @@ impl Plan {
     }
 }
 
-/// Sends `entry`'s placements as `held`'s renamed, where they are: the same number, each at
-/// the same place, and each asset of `held` becoming one asset of `entry` wherever it is
-/// drawn (instances whose models changed level). Empties `entry.placements` then.
+/// Sends `entry`'s assets and placements as `held`'s renamed, where they are: each held asset
+/// becomes one asset of `entry` (instances whose models changed level), and renaming `held`'s
+/// assets and placements so gives `entry`'s exactly. Empties them in `entry` then.
 fn reuse(held: &Entry, entry: &mut Entry) -> Option<Reuse> {
-    if held.placements.len() != entry.placements.len() || entry.placements.is_empty() {
+    if held.assets.len() != entry.assets.len() || held.placements.len() != entry.placements.len() {
         return None;
     }
-    let mut assets: Vec<[String; 2]> = Vec::new();
-    for (from, to) in held.placements.iter().zip(&entry.placements) {
-        if from.matrix != to.matrix {
+    let mut assets: Vec<Renamed> = Vec::new();
+    for (from, to) in held.assets.iter().zip(&entry.assets) {
+        if from.role != to.role || assets.iter().any(|r| r.from == from.hash) {
             return None;
         }
-        match assets.iter().find(|[a, _]| *a == from.asset) {
-            Some([_, b]) if *b != to.asset => return None,
-            Some(_) => {}
-            None => assets.push([from.asset.clone(), to.asset.clone()]),
+        if from.hash != to.hash || from.bytes != to.bytes {
+            assets.push(Renamed {
+                from: from.hash.clone(),
+                to: to.hash.clone(),
+                bytes: to.bytes,
+            });
         }
     }
-    assets.retain(|[a, b]| a != b);
-    entry.placements = Vec::new();
-    Some(Reuse {
+    let reuse = Reuse {
         entry: held.id.clone(),
         assets,
-    })
+    };
+    let mut made = entry.clone();
+    reuse.fill(held, &mut made);
+    if made != *entry {
+        return None;
+    }
+    entry.assets = Vec::new();
+    entry.placements = Vec::new();
+    Some(reuse)
 }
 
 #[cfg(test)]
