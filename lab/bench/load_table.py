@@ -2,7 +2,7 @@
 """Tabulates `horizon-lab load --json` reports, as `instances_load.sh` writes them
 (DIR/stream_<mode>_<viewers>.json), one markdown row per report: camera-to-delta latency,
 the server's cores, the views it coalesced, carried without planning and planned to no
-change, deltas a second and the first cut.
+change, deltas a second, stream bytes a second per viewer and the first cut.
 
     python3 lab/bench/load_table.py DIR [DIR ...]
 """
@@ -29,6 +29,7 @@ def rows(directory):
             f"| {'-' if cores is None else f'{cores:.2f}'} "
             f"| {fmt(r['views_sent'])} | {fmt(r.get('coalesced'))} | {fmt(r.get('carried'))} "
             f"| {fmt(r.get('planned_unchanged'))} | {r['deltas_per_second']:.1f} "
+            f"| {r['bytes_per_second_per_viewer'] / 1e3:,.1f} "
             f"| {r['first_cut_ms']['p50']:.0f} |"
         )
 
@@ -37,8 +38,8 @@ def main():
     if len(sys.argv) < 2:
         sys.exit(__doc__)
     print("| run | mode | viewers | delta p50 / p99 ms | server cores | views | coalesced "
-          "| carried | planned, unchanged | deltas/s | first cut p50 ms |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|")
+          "| carried | planned, unchanged | deltas/s | KB/s per viewer | first cut p50 ms |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     for directory in sys.argv[1:]:
         for row in rows(directory):
             print(row)

@@ -111,6 +111,9 @@ pub struct Report {
     pub error_samples: Vec<String>,
     /// The server's CPU use over the measured time, in cores.
     pub server_cpu_cores: Option<f64>,
+    /// This load generator's own CPU use over the measured time, in cores (it shares the
+    /// machine with the server).
+    pub load_cpu_cores: Option<f64>,
     /// Its resident memory at the end, bytes.
     pub server_rss_bytes: Option<u64>,
     /// Its resident memory growth from before the viewers connected, per viewer, bytes.
@@ -207,8 +210,9 @@ pub fn print(r: &Report, json: bool) -> anyhow::Result<()> {
         r.error_samples
     )?;
     outln!(
-        "server: {} cores, RSS {}, {} per viewer",
+        "server: {} cores (the load generator {}), RSS {}, {} per viewer",
         r.server_cpu_cores.map_or("-".into(), |c| format!("{c:.2}")),
+        r.load_cpu_cores.map_or("-".into(), |c| format!("{c:.2}")),
         mb(r.server_rss_bytes),
         r.rss_per_viewer_bytes
             .map_or("-".into(), |b| format!("{:.0} KB", b / 1e3))
@@ -345,6 +349,7 @@ async fn load(args: &Args) -> anyhow::Result<Report> {
     connected.wait().await;
     let metrics_before = stream_counters(&http, &args.url).await;
     let cpu_before = pid.and_then(cpu_seconds);
+    let own_before = cpu_seconds(std::process::id());
     let t0 = Instant::now();
     if let Ok(mut s) = started_measuring.lock() {
         *s = Some(t0);
@@ -362,6 +367,7 @@ async fn load(args: &Args) -> anyhow::Result<Report> {
     tokio::time::sleep(Duration::from_secs_f64(args.duration)).await;
     let seconds = t0.elapsed().as_secs_f64();
     let cpu_after = pid.and_then(cpu_seconds);
+    let own_after = cpu_seconds(std::process::id());
     let rss_end = pid.and_then(rss);
     let metrics_after = stream_counters(&http, &args.url).await;
     let _ = stop.send(true);
@@ -396,6 +402,7 @@ async fn load(args: &Args) -> anyhow::Result<Report> {
         errors: tally.errors.load(Ordering::Relaxed),
         error_samples: tally.samples.lock().map(|s| s.clone()).unwrap_or_default(),
         server_cpu_cores: cpu_before.zip(cpu_after).map(|(a, b)| (b - a) / seconds),
+        load_cpu_cores: own_before.zip(own_after).map(|(a, b)| (b - a) / seconds),
         server_rss_bytes: rss_end,
         rss_per_viewer_bytes: rss_before
             .zip(rss_connected)

@@ -128,6 +128,8 @@ window.horizon = {
   get cache_peak_bytes() { return assets.peakHeldBytes; },
   get cache_budget_bytes() { return assets.budgetBytes; },
   get failures() { return world.failures; },
+  /** Additions that reused a held entry's assets and placements (instances at new levels). */
+  get reused() { return world.reused; },
   get message() { return messageBox.textContent; },
   get message_is_error() { return messageBox.className === 'error'; },
   /** Nothing to load or fade: the frame is what the cut the viewer holds draws. */

@@ -32,6 +32,8 @@ export class World {
     /** ids of the entries in the current cut */
     this.current = new Set();
     this.objects = 0;
+    /** additions that reused a held entry's assets and placements */
+    this.reused = 0;
     this.generation = null;
     this.published = null;
     this.batches = new Map();
@@ -104,6 +106,7 @@ export class World {
     if (!data.reuses) return data;
     const held = this.entries.get(data.reuses.entry);
     if (!held) throw new Error(`${data.id} reuses the placements of ${data.reuses.entry}, which is not held`);
+    this.reused += 1;
     const renamed = new Map(data.reuses.assets.map((r) => [r.from, r]));
     const assets = held.data.assets.map((a) => {
       const r = renamed.get(a.hash);
