@@ -274,7 +274,11 @@ fn plan_at(
     planner.refined_entries = planner.totals.entries;
     planner.frontier = planner.frontier();
     planner.share_models();
-    planner.finish(stopped_by)
+    let mut plan = planner.finish(stopped_by);
+    if let Some(held) = held {
+        plan.inherit_bands(served.tree, held);
+    }
+    plan
 }
 
 /// A planned cut: what [`plan`] chose, with just enough to compare two plans; the wire

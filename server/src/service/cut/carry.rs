@@ -146,6 +146,82 @@ impl Plan {
             .collect()
     }
 
+    /// Gives this plan, just made after `held` ([`plan_after`]), its level bands at once:
+    /// a band is a function of its object, level and held level alone on the same tree with
+    /// the same models and pixel, so each band `held` has for the same three is taken over and
+    /// only the others are made (a replan moves a few levels of tens of thousands). Nothing
+    /// where `held` has no bands or was made on another tree, model table or pixel.
+    pub(super) fn inherit_bands(&mut self, tree: &horizon_world::Tree, held: &Plan) {
+        let old = &held.decisions.bands;
+        let same_levels = |a: &View, b: &View| {
+            a.pixel_solid_angle == b.pixel_solid_angle && a.max_pixel_error == b.max_pixel_error
+        };
+        if old.is_empty()
+            || self.decisions.consulted.is_empty()
+            || held.generation != self.generation
+            || held.generation != tree.generation
+            || !Arc::ptr_eq(&held.models, &self.models)
+            || !same_levels(&held.view, &self.view)
+        {
+            return;
+        }
+        let own = self.decisions.own_levels(tree.bvh.object_slots());
+        // Both lists are in tree id order (`consulted`): walk them together.
+        let mut k = 0;
+        let bands = self
+            .decisions
+            .consulted
+            .iter()
+            .map(|&(o, level)| {
+                let held_level = own.get(o.0 as usize).copied().unwrap_or(UNCHOSEN);
+                while k < old.len() && old[k].object.0 < o.0 {
+                    k += 1;
+                }
+                match old.get(k) {
+                    Some(b) if b.object == o && b.level == level && b.held == held_level => *b,
+                    _ => self.band(tree, o, level, held_level),
+                }
+            })
+            .collect();
+        self.decisions.bands = bands;
+        self.decisions.watch = None;
+    }
+
+    /// How many level bands the plan has: none until its first carry, unless it inherited
+    /// them from the plan it was made after ([`Plan::inherit_bands`]).
+    pub fn bands(&self) -> usize {
+        self.decisions.bands.len()
+    }
+
+    /// Checks that every level band is the one its object, level and held level make on
+    /// `tree` (none is fine: they are made at the first carry).
+    ///
+    /// # Errors
+    /// The first band that differs.
+    pub fn validate_bands(&self, tree: &horizon_world::Tree) -> Result<(), String> {
+        let bands = &self.decisions.bands;
+        if bands.is_empty() {
+            return Ok(());
+        }
+        if bands.len() != self.decisions.consulted.len() {
+            return Err(format!(
+                "{} bands for {} consulted levels",
+                bands.len(),
+                self.decisions.consulted.len()
+            ));
+        }
+        let own = self.decisions.own_levels(tree.bvh.object_slots());
+        for (b, &(o, level)) in bands.iter().zip(&self.decisions.consulted) {
+            let held = own.get(o.0 as usize).copied().unwrap_or(UNCHOSEN);
+            let made = self.band(tree, o, level, held);
+            let same = (b.level, b.held, b.lo, b.hi) == (made.level, made.held, made.lo, made.hi);
+            if b.object != o || !same {
+                return Err(format!("object {}: band {b:?}, made {made:?}", o.0));
+            }
+        }
+        Ok(())
+    }
+
     /// Where `o` keeps `level`, held at `held` ([`UNCHOSEN`]: chosen afresh); an empty band
     /// for an object the tree lacks.
     fn band(&self, tree: &horizon_world::Tree, o: ObjectId, level: u8, held: u8) -> LevelBand {
