@@ -438,7 +438,7 @@ async fn a_plan_carried_to_a_new_eye_is_the_plan_planning_again_makes() {
     let mut rng = horizon_mesh::rng::Rng::new(11);
     // Walks along the row, instances on and off, under each kind of budget.
     let (mut carried, mut relevelled, mut missed, mut changed) = (0, 0, 0, 0);
-    let (mut swapped, mut inherited) = (0, 0);
+    let (mut swapped, mut inherited, mut told) = (0, 0, 0);
     for walk in 0..16 {
         let mut view = View::at([
             -100.0 + 600.0 * rng.unit_f64(),
@@ -463,6 +463,19 @@ async fn a_plan_carried_to_a_new_eye_is_the_plan_planning_again_makes() {
             }
             view.eye[1] = view.eye[1].max(1.0);
             let again = state.plan_after(&view, Some(&held)).unwrap();
+            // Levels told by the held plan's bands are those choosing afresh gives.
+            if held.bands() > 0 {
+                let afresh = state
+                    .plan_after(&view, Some(&held.without_bands()))
+                    .unwrap();
+                assert_eq!(
+                    drawn(&again),
+                    drawn(&afresh),
+                    "walk {walk}: levels from bands"
+                );
+                assert_eq!(again.stopped_by, afresh.stopped_by);
+                told += 1;
+            }
             // Bands taken over from the held plan are those the new one would make.
             world
                 .with_served(|served| again.validate_bands(served.tree))
@@ -515,10 +528,16 @@ async fn a_plan_carried_to_a_new_eye_is_the_plan_planning_again_makes() {
     // that changes is never carried (asserted above); most unchanged cuts are carried.
     let counts = format!(
         "carried {carried} ({relevelled} with new levels, {swapped} refusing another node), \
-         missed {missed}, changed {changed}; {inherited} plans inherited bands"
+         missed {missed}, changed {changed}; {inherited} plans inherited bands, {told} took \
+         levels from them"
     );
     assert!(
-        carried > 100 && relevelled > 3 && swapped > 0 && changed > 10 && inherited > 100,
+        carried > 100
+            && relevelled > 3
+            && swapped > 0
+            && changed > 10
+            && inherited > 100
+            && told > 100,
         "{counts}"
     );
     eprintln!("{counts}");

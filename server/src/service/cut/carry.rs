@@ -187,6 +187,41 @@ impl Plan {
         self.decisions.watch = None;
     }
 
+    /// This plan's level bands by tree id, for planning after it at `view` on `tree` with
+    /// `models` ([`LevelChooser::choose`]); none where it has no bands, or was made on
+    /// another tree, model table or pixel.
+    pub(super) fn held_bands(
+        &self,
+        tree: &horizon_world::Tree,
+        models: &Arc<Models>,
+        view: &View,
+    ) -> Option<HeldBands<'_>> {
+        let bands = &self.decisions.bands;
+        let same = self.generation == tree.generation
+            && Arc::ptr_eq(&self.models, models)
+            && self.view.pixel_solid_angle == view.pixel_solid_angle
+            && self.view.max_pixel_error == view.max_pixel_error;
+        if bands.is_empty() || !same {
+            return None;
+        }
+        let mut index = vec![u32::MAX; tree.bvh.object_slots()];
+        for (i, b) in bands.iter().enumerate() {
+            if let Some(slot) = index.get_mut(b.object.0 as usize) {
+                *slot = i as u32;
+            }
+        }
+        Some(HeldBands { bands, index })
+    }
+
+    /// This plan with no level bands: planning after it chooses every level afresh (what
+    /// checks compare planning with the bands against).
+    pub fn without_bands(&self) -> Plan {
+        let mut plan = self.clone();
+        plan.decisions.bands = Vec::new();
+        plan.decisions.watch = None;
+        plan
+    }
+
     /// How many level bands the plan has: none until its first carry, unless it inherited
     /// them from the plan it was made after ([`Plan::inherit_bands`]).
     pub fn bands(&self) -> usize {
@@ -334,6 +369,7 @@ impl Plan {
             max_pixel_error,
             held: &unheld,
             chosen: &chosen,
+            bands: None,
         };
         let examined_hold = self.decisions.examined.iter().all(|&(o, level)| {
             chooser.of(o) == level
@@ -448,6 +484,28 @@ pub(super) struct LevelBand {
     level: u8,
     /// The level planning again holds the object to ([`UNCHOSEN`]: none).
     held: u8,
+}
+
+/// The level bands of the plan held, by tree id ([`Plan::held_bands`]): planning after it
+/// takes an object's level from its band where the eye is inside the band and the band was
+/// made with the level this plan holds the object to, which is what choosing would give.
+pub(super) struct HeldBands<'a> {
+    bands: &'a [LevelBand],
+    index: Vec<u32>,
+}
+
+impl HeldBands<'_> {
+    /// The level of `o` seen from `eye`, held at `held`, if its band says so.
+    pub(super) fn level(&self, o: ObjectId, eye: Vec3, held: Option<u8>) -> Option<u8> {
+        let i = *self.index.get(o.0 as usize)?;
+        let b = self.bands.get(i as usize)?;
+        if b.held != held.unwrap_or(UNCHOSEN) {
+            return None;
+        }
+        // The distance `level_at` takes, to the bit.
+        let d = (b.centre - eye).length() - b.radius;
+        (d > b.lo && d < b.hi).then_some(b.level)
+    }
 }
 
 /// How far (world units) an eye may move from where every [`LevelBand`] was last checked
