@@ -441,7 +441,11 @@ async fn write(
             tokio::task::spawn_blocking(move || {
                 let world = state.world().clone();
                 let held = before.as_ref().filter(|_| !want_reset);
+                let started = std::time::Instant::now();
                 let plan = state.plan_after(&view, held)?;
+                let kind = if held.is_some() { "after" } else { "fresh" };
+                metrics::histogram!("horizon_stream_plan_seconds", "held" => kind)
+                    .record(started.elapsed().as_secs_f64());
                 let delta = match (&before, want_reset) {
                     (Some(before), false) => {
                         Some(world.with_served(|served| plan.diff(before, served))?)
