@@ -67,7 +67,7 @@ use horizon_world::{Served, World, WorldError};
 
 mod carry;
 
-use carry::{consulted, BandWatch, HeldBands, LevelBand};
+use carry::{consulted, BandWatch, LevelBand};
 
 /// Plans the cut for `view` over what `served` holds at `generation`: see the module docs.
 pub fn plan(served: &Served<'_>, models: &AssetTable, view: &View) -> Plan {
@@ -244,11 +244,11 @@ pub fn plan_stopping(served: &Served<'_>, models: &AssetTable, view: &View) -> P
 /// those `keep` gives (by tree id; [`UNCHOSEN`]: none); refinements a byte, draw-call or
 /// triangle budget refuses skipped (`skip_refused`, the service's way) or stopping
 /// refinement ([`plan_stopping`]).
-fn plan_at<'a>(
-    served: &'a Served<'a>,
-    models: &'a AssetTable,
+fn plan_at(
+    served: &Served<'_>,
+    models: &AssetTable,
     view: &View,
-    held: Option<&'a Plan>,
+    held: Option<&Plan>,
     coarsening: f32,
     keep: Option<&[u8]>,
     skip_refused: bool,
@@ -268,22 +268,13 @@ fn plan_at<'a>(
         if view.budgets.max_bytes.is_none() {
             planner.held_model_levels = held.model_levels();
         }
-        // Bands tell the view's own levels: not where levels are chosen for another pixel
-        // or kept from another plan.
-        if coarsening == 1.0 && keep.is_none() {
-            planner.held_bands = held.held_bands(served.tree, &planner.models, view);
-        }
     }
     planner.seed();
     let stopped_by = planner.refine();
     planner.refined_entries = planner.totals.entries;
     planner.frontier = planner.frontier();
     planner.share_models();
-    let mut plan = planner.finish(stopped_by);
-    if let Some(held) = held {
-        plan.inherit_bands(served.tree, held);
-    }
-    plan
+    planner.finish(stopped_by)
 }
 
 /// A planned cut: what [`plan`] chose, with just enough to compare two plans; the wire
@@ -1113,8 +1104,6 @@ struct Planner<'a> {
     /// The level each model is drawn at in the plan a client holds (`share_levels`); empty
     /// under a byte budget.
     held_model_levels: HashMap<u64, u8>,
-    /// The level bands of the plan a client holds, where its levels are the view's own.
-    held_bands: Option<HeldBands<'a>>,
     /// The angle of one pixel, radians.
     pixel_angle: f32,
     /// The angle of the pixel levels of detail are chosen for: `pixel_angle`, or wider when
@@ -1204,7 +1193,6 @@ impl<'a> Planner<'a> {
             over_at_seed: false,
             held_levels: HeldLevels::None,
             held_model_levels: HashMap::new(),
-            held_bands: None,
             pixel_angle: pixel_angle(view),
             level_pixel_angle: pixel_angle(view),
             impostor_choices: Vec::new(),
@@ -1234,7 +1222,6 @@ impl<'a> Planner<'a> {
             max_pixel_error: self.view.max_pixel_error,
             held: &self.held_levels,
             chosen: &self.chosen,
-            bands: self.held_bands.as_ref(),
         }
     }
 
@@ -2010,8 +1997,6 @@ struct LevelChooser<'a> {
     held: &'a HeldLevels,
     /// Levels already chosen, by tree id (empty: none kept).
     chosen: &'a [std::cell::Cell<u8>],
-    /// The level bands of the plan held, where they tell a level without choosing it.
-    bands: Option<&'a HeldBands<'a>>,
 }
 
 impl LevelChooser<'_> {
@@ -2029,13 +2014,10 @@ impl LevelChooser<'_> {
     }
 
     fn choose(&self, o: ObjectId) -> u8 {
-        let held = self.held.of(self.tree, o);
-        if let Some(level) = self.bands.and_then(|b| b.level(o, self.eye, held)) {
-            return level;
-        }
         let Some(r) = self.tree.bvh.object(o) else {
             return 0;
         };
+        let held = self.held.of(self.tree, o);
         level_at(
             self.models,
             &r,

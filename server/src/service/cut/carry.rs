@@ -146,117 +146,6 @@ impl Plan {
             .collect()
     }
 
-    /// Gives this plan, just made after `held` ([`plan_after`]), its level bands at once:
-    /// a band is a function of its object, level and held level alone on the same tree with
-    /// the same models and pixel, so each band `held` has for the same three is taken over and
-    /// only the others are made (a replan moves a few levels of tens of thousands). Nothing
-    /// where `held` has no bands or was made on another tree, model table or pixel.
-    pub(super) fn inherit_bands(&mut self, tree: &horizon_world::Tree, held: &Plan) {
-        let old = &held.decisions.bands;
-        let same_levels = |a: &View, b: &View| {
-            a.pixel_solid_angle == b.pixel_solid_angle && a.max_pixel_error == b.max_pixel_error
-        };
-        if old.is_empty()
-            || self.decisions.consulted.is_empty()
-            || held.generation != self.generation
-            || held.generation != tree.generation
-            || !Arc::ptr_eq(&held.models, &self.models)
-            || !same_levels(&held.view, &self.view)
-        {
-            return;
-        }
-        let own = self.decisions.own_levels(tree.bvh.object_slots());
-        // Both lists are in tree id order (`consulted`): walk them together.
-        let mut k = 0;
-        let bands = self
-            .decisions
-            .consulted
-            .iter()
-            .map(|&(o, level)| {
-                let held_level = own.get(o.0 as usize).copied().unwrap_or(UNCHOSEN);
-                while k < old.len() && old[k].object.0 < o.0 {
-                    k += 1;
-                }
-                match old.get(k) {
-                    Some(b) if b.object == o && b.level == level && b.held == held_level => *b,
-                    _ => self.band(tree, o, level, held_level),
-                }
-            })
-            .collect();
-        self.decisions.bands = bands;
-        self.decisions.watch = None;
-    }
-
-    /// This plan's level bands by tree id, for planning after it at `view` on `tree` with
-    /// `models` ([`LevelChooser::choose`]); none where it has no bands, or was made on
-    /// another tree, model table or pixel.
-    pub(super) fn held_bands(
-        &self,
-        tree: &horizon_world::Tree,
-        models: &Arc<Models>,
-        view: &View,
-    ) -> Option<HeldBands<'_>> {
-        let bands = &self.decisions.bands;
-        let same = self.generation == tree.generation
-            && Arc::ptr_eq(&self.models, models)
-            && self.view.pixel_solid_angle == view.pixel_solid_angle
-            && self.view.max_pixel_error == view.max_pixel_error;
-        if bands.is_empty() || !same {
-            return None;
-        }
-        let mut index = vec![u32::MAX; tree.bvh.object_slots()];
-        for (i, b) in bands.iter().enumerate() {
-            if let Some(slot) = index.get_mut(b.object.0 as usize) {
-                *slot = i as u32;
-            }
-        }
-        Some(HeldBands { bands, index })
-    }
-
-    /// This plan with no level bands: planning after it chooses every level afresh (what
-    /// checks compare planning with the bands against).
-    pub fn without_bands(&self) -> Plan {
-        let mut plan = self.clone();
-        plan.decisions.bands = Vec::new();
-        plan.decisions.watch = None;
-        plan
-    }
-
-    /// How many level bands the plan has: none until its first carry, unless it inherited
-    /// them from the plan it was made after ([`Plan::inherit_bands`]).
-    pub fn bands(&self) -> usize {
-        self.decisions.bands.len()
-    }
-
-    /// Checks that every level band is the one its object, level and held level make on
-    /// `tree` (none is fine: they are made at the first carry).
-    ///
-    /// # Errors
-    /// The first band that differs.
-    pub fn validate_bands(&self, tree: &horizon_world::Tree) -> Result<(), String> {
-        let bands = &self.decisions.bands;
-        if bands.is_empty() {
-            return Ok(());
-        }
-        if bands.len() != self.decisions.consulted.len() {
-            return Err(format!(
-                "{} bands for {} consulted levels",
-                bands.len(),
-                self.decisions.consulted.len()
-            ));
-        }
-        let own = self.decisions.own_levels(tree.bvh.object_slots());
-        for (b, &(o, level)) in bands.iter().zip(&self.decisions.consulted) {
-            let held = own.get(o.0 as usize).copied().unwrap_or(UNCHOSEN);
-            let made = self.band(tree, o, level, held);
-            let same = (b.level, b.held, b.lo, b.hi) == (made.level, made.held, made.lo, made.hi);
-            if b.object != o || !same {
-                return Err(format!("object {}: band {b:?}, made {made:?}", o.0));
-            }
-        }
-        Ok(())
-    }
-
     /// Where `o` keeps `level`, held at `held` ([`UNCHOSEN`]: chosen afresh); an empty band
     /// for an object the tree lacks.
     fn band(&self, tree: &horizon_world::Tree, o: ObjectId, level: u8, held: u8) -> LevelBand {
@@ -369,7 +258,6 @@ impl Plan {
             max_pixel_error,
             held: &unheld,
             chosen: &chosen,
-            bands: None,
         };
         let examined_hold = self.decisions.examined.iter().all(|&(o, level)| {
             chooser.of(o) == level
@@ -484,28 +372,6 @@ pub(super) struct LevelBand {
     level: u8,
     /// The level planning again holds the object to ([`UNCHOSEN`]: none).
     held: u8,
-}
-
-/// The level bands of the plan held, by tree id ([`Plan::held_bands`]): planning after it
-/// takes an object's level from its band where the eye is inside the band and the band was
-/// made with the level this plan holds the object to, which is what choosing would give.
-pub(super) struct HeldBands<'a> {
-    bands: &'a [LevelBand],
-    index: Vec<u32>,
-}
-
-impl HeldBands<'_> {
-    /// The level of `o` seen from `eye`, held at `held`, if its band says so.
-    pub(super) fn level(&self, o: ObjectId, eye: Vec3, held: Option<u8>) -> Option<u8> {
-        let i = *self.index.get(o.0 as usize)?;
-        let b = self.bands.get(i as usize)?;
-        if b.held != held.unwrap_or(UNCHOSEN) {
-            return None;
-        }
-        // The distance `level_at` takes, to the bit.
-        let d = (b.centre - eye).length() - b.radius;
-        (d > b.lo && d < b.hi).then_some(b.level)
-    }
 }
 
 /// How far (world units) an eye may move from where every [`LevelBand`] was last checked
