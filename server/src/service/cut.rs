@@ -48,7 +48,9 @@
 //! client drawing each asset's placements in one instanced batch spends them.
 //!
 //! [`Plan::diff`] turns two plans into a stream's delta: removals with their reasons, and
-//! additions naming the entries they replace (load before drop).
+//! additions naming the entries they replace (load before drop). An instances entry that
+//! replaces the held one of the same node and objects, its models at other levels, sends no
+//! assets or placements but reuses the held entry's, renamed ([`Reuse`]).
 
 use std::cmp::Ordering;
 use std::collections::BinaryHeap;
