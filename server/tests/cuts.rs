@@ -689,6 +689,20 @@ impl Held {
                 assert_eq!(*seq, self.seq + 1, "a gap in seq");
                 self.seq = *seq;
                 let removed: HashSet<&str> = remove.iter().map(|r| r.id.as_str()).collect();
+                // An addition that reuses a held entry's assets and placements takes them
+                // from it before it goes.
+                let added: Vec<horizon_protocol::Entry> = add
+                    .iter()
+                    .map(|a| {
+                        let mut entry = a.entry.clone();
+                        if let Some(reuse) = &a.reuses {
+                            assert!(a.replaces.contains(&reuse.entry), "{}", a.entry.id);
+                            let held = self.entries.get(&reuse.entry).expect("reuses a held entry");
+                            reuse.fill(held, &mut entry);
+                        }
+                        entry
+                    })
+                    .collect();
                 for r in remove {
                     assert!(
                         self.entries.remove(&r.id).is_some(),
@@ -696,7 +710,7 @@ impl Held {
                         r.id
                     );
                 }
-                for a in add {
+                for (a, entry) in add.iter().zip(added) {
                     for r in &a.replaces {
                         assert!(
                             removed.contains(r.as_str()),
@@ -705,9 +719,7 @@ impl Held {
                         );
                     }
                     assert!(
-                        self.entries
-                            .insert(a.entry.id.clone(), a.entry.clone())
-                            .is_none(),
+                        self.entries.insert(entry.id.clone(), entry).is_none(),
                         "adds {} twice",
                         a.entry.id
                     );
