@@ -26,6 +26,7 @@ use axum::http::{Request, StatusCode};
 use futures_util::{SinkExt, StreamExt};
 use glam::{Affine3A, Vec3};
 use horizon_aggregate::AggregateOptions;
+use horizon_mesh::rng::Rng;
 use horizon_protocol::{
     ClientMessage, CutResponse, EntryKind, ModelInfo, RemoveReason, ServerMessage, StoppedBy, View,
 };
@@ -103,6 +104,27 @@ fn built(
         .rebuild_aggregates(AggregateOptions::default(), &|_| {})
         .unwrap();
     (dir, Arc::new(world))
+}
+
+/// A seeded view over the row: from 100 m before its start to 500 m along it, 2 to 42 m up,
+/// from 60 m to one side to 140 m to the other.
+fn over_the_row(rng: &mut Rng) -> View {
+    View::at([
+        -100.0 + 600.0 * rng.unit_f64(),
+        2.0 + 40.0 * rng.unit_f64(),
+        -60.0 + 200.0 * rng.unit_f64(),
+    ])
+}
+
+/// Moves `eye` a seeded step in a seeded direction, `shortest` to `shortest * range` long
+/// (spread evenly in its logarithm), and never below 1 m up.
+fn step(rng: &mut Rng, eye: &mut [f64; 3], shortest: f64, range: f64) {
+    let dir = rng.unit_vector();
+    let length = shortest * range.powf(rng.unit_f64());
+    for i in 0..3 {
+        eye[i] += f64::from(dir[i]) * length;
+    }
+    eye[1] = eye[1].max(1.0);
 }
 
 fn state(world: &Arc<World>) -> AppState {
@@ -288,7 +310,7 @@ async fn levels_rise_with_distance_and_cuts_stay_complete() {
         }
     }
     // Random views at the default solid angle: complete, every asset stored.
-    let mut rng = horizon_mesh::rng::Rng::new(3);
+    let mut rng = Rng::new(3);
     for _ in 0..30 {
         let eye = [
             -200.0 + 3400.0 * rng.unit_f64(),
@@ -433,16 +455,12 @@ fn drawn(plan: &Plan) -> Vec<DrawnEntry> {
 async fn a_plan_carried_to_a_new_eye_is_the_plan_planning_again_makes() {
     let (_dir, world) = world("carry");
     let state = state(&world);
-    let mut rng = horizon_mesh::rng::Rng::new(11);
+    let mut rng = Rng::new(11);
     // Walks along the row, instances on and off, under each kind of budget.
     let (mut carried, mut relevelled, mut missed, mut changed) = (0, 0, 0, 0);
     let mut swapped = 0;
     for walk in 0..16 {
-        let mut view = View::at([
-            -100.0 + 600.0 * rng.unit_f64(),
-            2.0 + 40.0 * rng.unit_f64(),
-            -60.0 + 200.0 * rng.unit_f64(),
-        ]);
+        let mut view = over_the_row(&mut rng);
         view.min_solid_angle = [0.001, 0.0001][walk % 2];
         view.instances = (walk / 2) % 2 == 0;
         match walk / 4 {
@@ -454,12 +472,7 @@ async fn a_plan_carried_to_a_new_eye_is_the_plan_planning_again_makes() {
         let mut held = state.plan(&view).unwrap();
         for _ in 0..40 {
             // A step of 5 cm to 20 m.
-            let dir = rng.unit_vector();
-            let step = 0.05 * 400f64.powf(rng.unit_f64());
-            for i in 0..3 {
-                view.eye[i] += f64::from(dir[i]) * step;
-            }
-            view.eye[1] = view.eye[1].max(1.0);
+            step(&mut rng, &mut view.eye, 0.05, 400.0);
             let again = state.plan_after(&view, Some(&held)).unwrap();
             let mut moved = held.clone();
             let carries = world
@@ -516,23 +529,14 @@ async fn a_plan_carried_to_a_new_eye_is_the_plan_planning_again_makes() {
 async fn an_instances_entry_whose_models_moved_level_reuses_the_placements_held() {
     let (_dir, world) = world("reuse");
     let state = state(&world);
-    let mut rng = horizon_mesh::rng::Rng::new(5);
+    let mut rng = Rng::new(5);
     let (mut reused, mut renamed, mut sent_whole) = (0, 0, 0);
     for walk in 0..8 {
-        let mut view = View::at([
-            -100.0 + 600.0 * rng.unit_f64(),
-            2.0 + 40.0 * rng.unit_f64(),
-            -60.0 + 200.0 * rng.unit_f64(),
-        ]);
+        let mut view = over_the_row(&mut rng);
         view.min_solid_angle = [0.001, 0.0001][walk % 2];
         let mut held = state.plan(&view).unwrap();
         for _ in 0..30 {
-            let dir = rng.unit_vector();
-            let step = 0.5 * 100f64.powf(rng.unit_f64());
-            for i in 0..3 {
-                view.eye[i] += f64::from(dir[i]) * step;
-            }
-            view.eye[1] = view.eye[1].max(1.0);
+            step(&mut rng, &mut view.eye, 0.5, 100.0);
             let again = state.plan_after(&view, Some(&held)).unwrap();
             let (add, _) = world
                 .with_served(|served| again.diff(&held, served))
@@ -617,14 +621,10 @@ async fn a_plan_at_the_edge_of_a_budget_is_never_carried_into_another_cut() {
     check(&held, &view);
     // Budgets found, by bisection, where one more unit changes the cut; small steps from
     // there, with and without instances, under bytes and triangles.
-    let mut rng = horizon_mesh::rng::Rng::new(777);
+    let mut rng = Rng::new(777);
     let (mut carried, mut steps) = (0, 0);
     for walk in 0..24 {
-        let mut start = View::at([
-            -100.0 + 600.0 * rng.unit_f64(),
-            2.0 + 40.0 * rng.unit_f64(),
-            -60.0 + 200.0 * rng.unit_f64(),
-        ]);
+        let mut start = over_the_row(&mut rng);
         start.min_solid_angle = [1e-4, 1e-5, 1e-6][walk % 3];
         start.instances = (walk / 3) % 2 == 0;
         let triangles = (walk / 6) % 2 == 0;
@@ -655,12 +655,7 @@ async fn a_plan_at_the_edge_of_a_budget_is_never_carried_into_another_cut() {
         let held = state.plan(&start).unwrap();
         for _ in 0..12 {
             let mut v = start;
-            let dir = rng.unit_vector();
-            let step = 0.05 * 400f64.powf(rng.unit_f64());
-            for i in 0..3 {
-                v.eye[i] += f64::from(dir[i]) * step;
-            }
-            v.eye[1] = v.eye[1].max(1.0);
+            step(&mut rng, &mut v.eye, 0.05, 400.0);
             steps += 1;
             if check(&held, &v) {
                 carried += 1;
@@ -840,14 +835,10 @@ async fn refining_on_past_a_refusal_stays_within_the_budget_and_complete() {
     let many_state = state(&many);
     let table = AssetTable::default();
     table.refresh(&many).unwrap();
-    let mut rng = horizon_mesh::rng::Rng::new(5);
+    let mut rng = Rng::new(5);
     let (mut skips_seen, mut entry_stops) = (0, 0);
     for round in 0..40 {
-        let mut view = View::at([
-            -100.0 + 600.0 * rng.unit_f64(),
-            2.0 + 40.0 * rng.unit_f64(),
-            -60.0 + 200.0 * rng.unit_f64(),
-        ]);
+        let mut view = over_the_row(&mut rng);
         view.min_solid_angle = [1e-4, 1e-5, 1e-6][round % 3];
         view.instances = round % 2 == 0;
         let scale = 10f64.powf(2.0 * rng.unit_f64());
