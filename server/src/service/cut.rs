@@ -2641,7 +2641,7 @@ fn reuse(held: &Entry, entry: &mut Entry) -> Option<Reuse> {
     }
     let mut assets: Vec<Renamed> = Vec::new();
     for (from, to) in held.assets.iter().zip(&entry.assets) {
-        if from.role != to.role || assets.iter().any(|r| r.from == from.hash) {
+        if assets.iter().any(|r| r.from == from.hash) {
             return None;
         }
         if from.hash != to.hash || from.bytes != to.bytes {
