@@ -14,10 +14,8 @@ OUT=${2:-lab/results/query_api/floor}
 H=${H:-target/release/horizon}
 L=${L:-target/release/horizon-lab}
 mkdir -p "$OUT"
-work=$(mktemp -d)
 source "$(dirname "${BASH_SOURCE[0]}")/lib.sh"
-cleanup() { stop; rm -rf "$work"; }
-trap cleanup EXIT
+scratch
 serve "$WORLD"
 for viewers in 300 1000; do
   echo "load: $viewers viewers standing still" >&2

@@ -22,10 +22,8 @@ SECONDS_EACH=${SECONDS_EACH:-20}
 H=${H:-target/release/horizon}
 L=${L:-target/release/horizon-lab}
 mkdir -p "$OUT"
-work=$(mktemp -d)
 source "$(dirname "${BASH_SOURCE[0]}")/lib.sh"
-cleanup() { stop; rm -rf "$work"; }
-trap cleanup EXIT
+scratch
 serve "$WORLD"
 for encoding in $ENCODINGS; do
   for rate in $RATES; do

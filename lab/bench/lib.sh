@@ -6,7 +6,10 @@
 #   serve DIR [LOGS]   starts `$H serve DIR`, waits for the URL it prints, and sets $pid and
 #                      $url; its stdout and log go to LOGS (default $work)
 #   stop               ends it (nothing if none runs)
-# A script sets L (to generate) or H (to serve), and calls `stop` from its EXIT trap.
+# A scratch directory for the server's output, removed with the server on exit:
+#   scratch            sets $work, and traps EXIT to `stop` and remove it
+# A script sets L (to generate) or H (to serve), and calls `stop` from its EXIT trap (`scratch`
+# sets one).
 pid=
 
 generate() {
@@ -35,4 +38,9 @@ serve() {
 stop() {
   if [ -n "$pid" ]; then kill "$pid" 2>/dev/null || true; wait "$pid" 2>/dev/null || true; fi
   pid=
+}
+
+scratch() {
+  work=$(mktemp -d)
+  trap 'stop; rm -rf "$work"' EXIT
 }

@@ -21,10 +21,8 @@ PATH_JSON=${PATH_JSON:-'[[888, 2, 20], [888, 2, 1660]]'}
 H=${H:-target/release/horizon}
 C=${C:-target/release/horizon-client}
 mkdir -p "$OUT"
-work=$(mktemp -d)
 source "$(dirname "${BASH_SOURCE[0]}")/lib.sh"
-cleanup() { stop; rm -rf "$work"; }
-trap cleanup EXIT
+scratch
 serve "$WORLD"
 echo "$PATH_JSON" > "$work/path.json"
 for round in $(seq "$ROUNDS"); do

@@ -23,10 +23,8 @@ H=target/release/horizon
 L=target/release/horizon-lab
 C=target/release/horizon-client
 mkdir -p "$OUT"
-work=$(mktemp -d)
 source "$(dirname "${BASH_SOURCE[0]}")/lib.sh"
-cleanup() { stop; rm -rf "$work"; }
-trap cleanup EXIT
+scratch
 
 echo "copying $CITY" >&2
 cp -r "$CITY" "$work/city"
